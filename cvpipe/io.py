@@ -1,0 +1,227 @@
+"""Validated image reading, artifact formats and atomic writes.
+
+This is the only module of the library that touches the disk. Every writer writes to a temporary file in the
+destination folder and renames it, so an interrupted run never leaves a half-written output behind.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Iterator
+
+import cv2
+import numpy as np
+
+from .errors import InputError
+
+#: default upper bound on the pixel count of an input image (100 megapixels)
+DEFAULT_MAX_PIXELS = 100_000_000
+#: image file suffixes that the folder listings pick up
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm")
+#: smallest accepted side of an input image, in pixels
+MIN_SIDE = 8
+_MODES = {"color": cv2.IMREAD_COLOR, "gray": cv2.IMREAD_GRAYSCALE, "unchanged": cv2.IMREAD_UNCHANGED}
+
+
+def _header_size(path: Path, data: bytes) -> tuple[int, int] | None:
+    """(width, height) from the file header without decoding the pixels, or None if the header is not understood."""
+    try:
+        from PIL import Image
+    except ImportError:  # pragma: no cover - pillow comes with scikit-image
+        return None
+    Image.MAX_IMAGE_PIXELS = None  # our own limit applies, with our own message
+    try:
+        import io as _io
+
+        with Image.open(_io.BytesIO(data)) as im:
+            return im.size
+    except Exception:
+        return None
+
+
+def _looks_truncated(data: bytes) -> bool:
+    """True when a PNG or JPEG stream misses its end marker (a download or copy cut short)."""
+    if data[:8] == b"\x89PNG\r\n\x1a\n":
+        return b"IEND" not in data[-64:]
+    if data[:2] == b"\xff\xd8":
+        return b"\xff\xd9" not in data[-4096:]
+    return False
+
+
+def read_image(path: str | os.PathLike, mode: str = "color", max_pixels: int = DEFAULT_MAX_PIXELS) -> np.ndarray:
+    """Read an image file with checks that name the file and say what was expected.
+
+    Parameters
+    ----------
+    path : path-like
+        Image file (PNG, JPEG, BMP, TIFF, WebP, PGM/PPM).
+    mode : {"color", "gray", "unchanged"}
+        ``color`` gives (H, W, 3) uint8 BGR, ``gray`` gives (H, W) uint8, ``unchanged`` keeps depth and channels.
+    max_pixels : int
+        Largest accepted width x height; larger images are refused before they are decoded.
+
+    Returns
+    -------
+    ndarray
+        The decoded image.
+
+    Raises
+    ------
+    InputError
+        Missing file, empty file, not an image, truncated file, too small or too many pixels.
+    """
+    if mode not in _MODES:
+        raise ValueError(f"`mode` must be one of {sorted(_MODES)}, got {mode!r}")
+    if not isinstance(max_pixels, (int, np.integer)) or max_pixels <= 0:
+        raise ValueError(f"`max_pixels` must be a positive integer, got {max_pixels!r}")
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"{p}: no such file")
+    if p.is_dir():
+        raise InputError(f"{p}: is a folder, expected an image file")
+    data = p.read_bytes()
+    if not data:
+        raise InputError(f"{p}: file is empty (0 bytes), expected an image")
+    size = _header_size(p, data)
+    if size is not None and size[0] * size[1] > max_pixels:
+        raise InputError(
+            f"{p}: {size[0]}x{size[1]} = {size[0] * size[1]} pixels exceeds the limit of {max_pixels} pixels"
+        )
+    if _looks_truncated(data):
+        raise InputError(f"{p}: truncated image file (end marker missing)")
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), _MODES[mode])
+    if img is None or img.size == 0:
+        raise InputError(f"{p}: not a readable image (expected PNG, JPEG, BMP, TIFF, WebP or PGM/PPM)")
+    h, w = img.shape[:2]
+    if h * w > max_pixels:
+        raise InputError(f"{p}: {w}x{h} = {w * h} pixels exceeds the limit of {max_pixels} pixels")
+    if min(h, w) < MIN_SIDE:
+        raise InputError(f"{p}: {w}x{h} is too small, expected at least {MIN_SIDE}x{MIN_SIDE} pixels")
+    if mode != "unchanged" and img.dtype != np.uint8:
+        img = cv2.convertScaleAbs(img, alpha=255.0 / float(np.iinfo(img.dtype).max))
+    return img
+
+
+def to_gray(img: np.ndarray) -> np.ndarray:
+    """(H, W) uint8 grayscale from a gray, BGR or BGRA uint8 image."""
+    if img.ndim == 2:
+        return img
+    if img.ndim == 3 and img.shape[2] == 3:
+        return cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+    if img.ndim == 3 and img.shape[2] == 4:
+        return cv2.cvtColor(img, cv2.COLOR_BGRA2GRAY)
+    raise ValueError(f"`img` must be (H, W), (H, W, 3) or (H, W, 4), got shape {img.shape}")
+
+
+def to_bgr(img: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 BGR from a gray, BGR or BGRA uint8 image."""
+    if img.ndim == 2:
+        return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+    if img.ndim == 3 and img.shape[2] == 3:
+        return img
+    if img.ndim == 3 and img.shape[2] == 4:
+        return cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
+    raise ValueError(f"`img` must be (H, W), (H, W, 3) or (H, W, 4), got shape {img.shape}")
+
+
+def list_images(folder: str | os.PathLike) -> list[Path]:
+    """Image files directly inside ``folder``, sorted by name."""
+    d = Path(folder)
+    if not d.is_dir():
+        raise InputError(f"{d}: no such folder")
+    return sorted(p for p in d.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; on success rename it to ``path``, on failure delete it."""
+    dest = Path(path)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{dest.stem}.", suffix=f".tmp{dest.suffix}", dir=dest.parent)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        os.replace(tmp_path, dest)
+    finally:
+        if tmp_path.exists():
+            tmp_path.unlink()
+
+
+def save_image(path: str | os.PathLike, img: np.ndarray, jpeg_quality: int = 95) -> None:
+    """Write an image atomically; the format follows the suffix (PNG keeps 16-bit)."""
+    dest = Path(path)
+    params = [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)] if dest.suffix.lower() in (".jpg", ".jpeg") else []
+    ok, buf = cv2.imencode(dest.suffix, img, params)
+    if not ok:
+        raise InputError(f"{dest}: could not encode the image as {dest.suffix}")
+    with atomic_path(dest) as tmp:
+        tmp.write_bytes(buf.tobytes())
+
+
+def save_npz(path: str | os.PathLike, **arrays: Any) -> None:
+    """Write named arrays to a compressed ``.npz`` atomically (no object arrays, so no pickle is needed to load)."""
+    clean = {}
+    for key, value in arrays.items():
+        arr = np.asarray(value)
+        if arr.dtype == object:
+            raise ValueError(f"array `{key}` has dtype object, which .npz cannot store without pickle")
+        clean[key] = arr
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **clean)
+
+
+def load_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """Read every array of an ``.npz`` written by :func:`save_npz` (``allow_pickle=False``)."""
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"{p}: no such file")
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            return {k: z[k] for k in z.files}
+    except (ValueError, OSError, EOFError) as exc:
+        raise InputError(f"{p}: not a readable .npz archive ({exc})") from exc
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        return _jsonable(obj.item())
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None
+    if isinstance(obj, Path):
+        return str(obj)
+    return obj
+
+
+def dumps_json(obj: Any) -> str:
+    """Sorted-key JSON text; numpy values become plain numbers, NaN/inf become null."""
+    return json.dumps(_jsonable(obj), sort_keys=True, indent=2, allow_nan=False)
+
+
+def save_json(path: str | os.PathLike, obj: Any) -> None:
+    """Write sorted-key JSON atomically."""
+    text = dumps_json(obj) + "\n"
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+def load_json(path: str | os.PathLike) -> Any:
+    """Read a JSON file, naming the file when it is missing or malformed."""
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"{p}: no such file")
+    try:
+        return json.loads(p.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{p}: not valid JSON ({exc})") from exc

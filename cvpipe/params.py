@@ -1,0 +1,185 @@
+"""``params.yaml`` sections as frozen dataclasses.
+
+Each stage's parameters are one frozen dataclass whose field names are exactly the keys of its ``params.yaml``
+section and whose defaults are the single place where defaults are declared (the CLI reuses them; a test checks
+that ``params.yaml`` agrees). Unknown or mistyped keys are rejected with a message naming the key.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import types
+import typing
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TypeVar
+
+import yaml
+
+from .errors import InputError
+
+T = TypeVar("T")
+
+
+def _check_type(value: Any, tp: Any, key: str) -> Any:
+    """Return ``value`` converted to ``tp`` when that is lossless, else raise naming ``key``."""
+    origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        args = typing.get_args(tp)
+        if value is None and type(None) in args:
+            return None
+        errors = []
+        for arg in args:
+            if arg is type(None):
+                continue
+            try:
+                return _check_type(value, arg, key)
+            except InputError as exc:
+                errors.append(str(exc))
+        raise InputError(errors[0] if errors else f"`{key}` has the wrong type")
+    if origin is typing.Literal:
+        choices = typing.get_args(tp)
+        if value not in choices:
+            raise InputError(f"`{key}` must be one of {list(choices)}, got {value!r}")
+        return value
+    if origin in (tuple, list):
+        if not isinstance(value, (list, tuple)):
+            raise InputError(f"`{key}` must be a list, got {value!r}")
+        args = typing.get_args(tp)
+        if origin is tuple and args and args[-1] is not Ellipsis:
+            if len(value) != len(args):
+                raise InputError(f"`{key}` must be a list of {len(args)} values, got {value!r}")
+            return tuple(_check_type(v, a, f"{key}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
+        inner = args[0] if args else Any
+        return tuple(_check_type(v, inner, f"{key}[{i}]") for i, v in enumerate(value))
+    if tp is Any:
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise InputError(f"`{key}` must be true or false, got {value!r}")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise InputError(f"`{key}` must be an integer, got {value!r}")
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise InputError(f"`{key}` must be a number, got {value!r}")
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise InputError(f"`{key}` must be a string, got {value!r}")
+        return value
+    return value
+
+
+def from_mapping(cls: type[T], mapping: Any, section: str) -> T:
+    """Build the dataclass ``cls`` from a mapping, rejecting unknown keys and wrong types.
+
+    Parameters
+    ----------
+    cls : dataclass type
+        The frozen dataclass of the section.
+    mapping : dict or None
+        The section's keys; missing keys take the dataclass defaults.
+    section : str
+        The dotted section name, used in messages (``"logo.match"``).
+    """
+    if mapping is None:
+        mapping = {}
+    if not isinstance(mapping, dict):
+        raise InputError(f"params section `{section}` must be a mapping, got {type(mapping).__name__}")
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(mapping) - set(fields))
+    if unknown:
+        raise InputError(
+            f"unknown key `{section}.{unknown[0]}` in params; expected one of: {', '.join(sorted(fields))}"
+        )
+    hints = typing.get_type_hints(cls)
+    values = {k: _check_type(v, hints[k], f"{section}.{k}") for k, v in mapping.items()}
+    try:
+        return cls(**values)
+    except ValueError as exc:
+        raise InputError(f"params section `{section}`: {exc}") from exc
+
+
+def read_params_file(path: str | os.PathLike = "params.yaml") -> dict:
+    """The whole ``params.yaml`` as a dict (``yaml.safe_load``)."""
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"{p}: no such file")
+    try:
+        data = yaml.safe_load(p.read_text(encoding="utf-8"))
+    except yaml.YAMLError as exc:
+        raise InputError(f"{p}: not valid YAML ({exc})") from exc
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise InputError(f"{p}: expected a mapping of sections at the top level, got {type(data).__name__}")
+    return data
+
+
+def load_section(cls: type[T], section: str, path: str | os.PathLike = "params.yaml") -> T:
+    """Load the dotted ``section`` (``"logo.match"``) of ``params.yaml`` into ``cls``."""
+    node: Any = read_params_file(path)
+    for part in section.split("."):
+        if not isinstance(node, dict) or part not in node:
+            raise InputError(f"{path}: section `{section}` is missing")
+        node = node[part]
+    return from_mapping(cls, node, section)
+
+
+def _in_range(name: str, value: float, lo: float | None = None, hi: float | None = None, *, lo_open=False) -> None:
+    """Raise ``ValueError`` naming ``name`` when ``value`` lies outside [lo, hi] ((lo, hi] with ``lo_open``)."""
+    bad = (lo is not None and (value <= lo if lo_open else value < lo)) or (hi is not None and value > hi)
+    if bad:
+        left = "(" if lo_open else "["
+        raise ValueError(f"`{name}` must be in {left}{lo if lo is not None else '-inf'}, "
+                         f"{hi if hi is not None else 'inf'}], got {value}")
+
+
+# --------------------------------------------------------------------------------------------- shared sections
+
+
+@dataclass(frozen=True)
+class SamplesParams:
+    """``samples``: the bundled sample data set."""
+
+    seed: int = 20261122
+    logo_scenes: int = 40
+    logo_negatives: int = 12
+
+    def __post_init__(self):
+        _in_range("logo_scenes", self.logo_scenes, 1, 1000)
+        _in_range("logo_negatives", self.logo_negatives, 0, 1000)
+
+
+@dataclass(frozen=True)
+class FeaturesParams:
+    """Keypoint detection (``<task>.features``)."""
+
+    detector: str = "sift"
+    max_features: int = 4000
+
+    def __post_init__(self):
+        _in_range("max_features", self.max_features, 1, 1_000_000)
+
+
+@dataclass(frozen=True)
+class MatchParams:
+    """Descriptor matching (``<task>.match``)."""
+
+    ratio: float = 0.8
+    cross_check: bool = False
+
+    def __post_init__(self):
+        _in_range("ratio", self.ratio, 0.0, 1.0, lo_open=True)
+
+
+#: dotted params.yaml section -> dataclass; the defaults test walks this table
+SECTIONS: dict[str, type] = {
+    "samples": SamplesParams,
+    "homography.features": FeaturesParams,
+    "homography.match": MatchParams,
+}
