@@ -35,8 +35,9 @@ from .errors import EstimationError, InputError
 DEFAULT_MAX_ITERS = 10_000
 #: smallest |twice the triangle area| of a sample triple in Hartley-normalized coordinates (mean radius sqrt(2))
 _COLLINEAR_EPS = 1e-5
-#: relative size of the smaller principal axis below which a whole point set counts as collinear
-_ALL_COLLINEAR_EPS = 1e-9
+#: relative size of the smaller principal axis below which a whole point set counts as collinear (1e-7: the
+#: 2x2 covariance resolves eigenvalue ratios down to ~1e-15, i.e. axis ratios down to ~3e-8)
+_ALL_COLLINEAR_EPS = 1e-7
 #: SPRT: time of one hypothesis (sample, checks, solve) in units of one point verification, and models per sample
 _SPRT_TM = 200.0
 _SPRT_MS = 1.0
@@ -236,44 +237,50 @@ def dlt(src, dst, weights=None) -> np.ndarray:
 # ----------------------------------------------------------------------------------------------- numba core
 
 
-@njit(cache=True)
-def _sorted_sample(u, n, out, chosen):
-    """Four distinct indices ``out`` in [0, n): index k is uniform over the n - k values not yet chosen.
+@njit(cache=True, inline="always")
+def _sample4(u0, u1, u2, u3, n):
+    """Four distinct indices in [0, n) from four uniforms in [0, 1): exact sampling without replacement.
 
-    ``chosen`` (4,) is scratch space holding the indices sorted.
+    The k-th index is uniform over the n - k values not chosen yet: draw j in [0, n - k) and walk it past the
+    already chosen indices in increasing order (branch-light scalar code; this runs once per hypothesis).
     """
-    for k in range(4):
-        j = int(u[k] * (n - k))
-        if j >= n - k:
-            j = n - k - 1
-        # chosen[:k] is kept sorted; every chosen index <= j pushes j one further
-        for m in range(k):
-            if chosen[m] <= j:
-                j += 1
-        # insert j keeping chosen[:k+1] sorted
-        pos = k
-        while pos > 0 and chosen[pos - 1] > j:
-            chosen[pos] = chosen[pos - 1]
-            pos -= 1
-        chosen[pos] = j
-        out[k] = j
-    return out
+    a = min(int(u0 * n), n - 1)
+    b = min(int(u1 * (n - 1)), n - 2)
+    c = min(int(u2 * (n - 2)), n - 3)
+    d = min(int(u3 * (n - 3)), n - 4)
+    if b >= a:
+        b += 1
+    lo = min(a, b)
+    hi = max(a, b)
+    if c >= lo:
+        c += 1
+    if c >= hi:
+        c += 1
+    x0 = min(lo, c)
+    x2 = max(hi, c)
+    x1 = lo + hi + c - x0 - x2
+    if d >= x0:
+        d += 1
+    if d >= x1:
+        d += 1
+    if d >= x2:
+        d += 1
+    return a, b, c, d
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _det3(ax, ay, bx, by, cx, cy):
     """det([a b c]) of homogeneous points (z = 1): twice the signed area of triangle abc."""
     return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
 
 
-@njit(cache=True)
-def _minimal_solve(sn, dn, idx, H):
+@njit(cache=True, inline="always")
+def _minimal_solve(sn, dn, i0, i1, i2, i3, H):
     """Homography (normalized coordinates) through four correspondences, or False for a degenerate sample.
 
     Degenerate: any triple of the four points collinear in either view, or the orientation of the four triangles
     not preserved consistently (sign(D_src * D_dst) must be the same for all four triples).
     """
-    i0, i1, i2, i3 = idx[0], idx[1], idx[2], idx[3]
     # source basis: M = [p0 p1 p2], lambda = adj(M) p3 (scale-free), components are triangle determinants
     x0, y0, x1, y1, x2, y2, x3, y3 = (sn[i0, 0], sn[i0, 1], sn[i1, 0], sn[i1, 1],
                                       sn[i2, 0], sn[i2, 1], sn[i3, 0], sn[i3, 1])
@@ -332,7 +339,7 @@ def _minimal_solve(sn, dn, idx, H):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _matmul3(A, B, out):
     for i in range(3):
         for j in range(3):
@@ -585,8 +592,6 @@ def _ransac_chunk(src, dst, sn, dn, Ts, Tdi, u, thr2, log1mconf, max_iters, lo, 
     ``state`` (see ``_STATE``) is updated in place, as is ``best_H`` (pixel coordinates). Returns the rows used.
     """
     n = src.shape[0]
-    idx = np.empty(4, np.int64)
-    chosen = np.empty(4, np.int64)
     Hn = np.empty((3, 3))
     tmp = np.empty((3, 3))
     H = np.empty((3, 3))
@@ -596,8 +601,8 @@ def _ransac_chunk(src, dst, sn, dn, Ts, Tdi, u, thr2, log1mconf, max_iters, lo, 
         if state[3] >= state[2]:
             break
         used += 1
-        _sorted_sample(u[k], n, idx, chosen)
-        if not _minimal_solve(sn, dn, idx, Hn):
+        i0, i1, i2, i3 = _sample4(u[k, 0], u[k, 1], u[k, 2], u[k, 3], n)
+        if not _minimal_solve(sn, dn, i0, i1, i2, i3, Hn):
             state[4] += 1
             continue
         state[3] += 1
@@ -782,6 +787,84 @@ def _lm_refine(src, dst, mask, H0, max_iter):
     return H, cost / (sd * sd)
 
 
+@njit(cache=True)
+def _normalize(p):
+    """Hartley normalization in one pass: (T (3, 3), normalized points (N, 2), not_collinear).
+
+    ``not_collinear`` is False when the smaller principal axis of the points is below ``_ALL_COLLINEAR_EPS`` times
+    the larger one (computed from the 2x2 covariance: ratio of eigenvalues <= eps^2), or all points coincide.
+    """
+    n = p.shape[0]
+    cx = 0.0
+    cy = 0.0
+    for i in range(n):
+        cx += p[i, 0]
+        cy += p[i, 1]
+    cx /= n
+    cy /= n
+    md = 0.0
+    for i in range(n):
+        md += math.sqrt((p[i, 0] - cx) ** 2 + (p[i, 1] - cy) ** 2)
+    md /= n
+    T = np.eye(3)
+    out = np.empty((n, 2))
+    if not md > 0.0:
+        return T, out, False
+    s = math.sqrt(2.0) / md
+    a = b = c = 0.0
+    for i in range(n):
+        x = (p[i, 0] - cx) * s
+        y = (p[i, 1] - cy) * s
+        out[i, 0] = x
+        out[i, 1] = y
+        a += x * x
+        b += x * y
+        c += y * y
+    T[0, 0] = s
+    T[1, 1] = s
+    T[0, 2] = -s * cx
+    T[1, 2] = -s * cy
+    l1 = 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
+    det = a * c - b * b
+    return T, out, det > (_ALL_COLLINEAR_EPS ** 2) * l1 * l1
+
+
+@njit(cache=True)
+def _finalize(src, dst, H0, thr2, refine, rounds):
+    """Inliers of H0 and, with ``refine``, up to ``rounds`` of Levenberg-Marquardt on the inliers, re-selecting the
+    inliers after each round and keeping a round only if the MSAC cost does not grow. Returns (H, mask, e2)."""
+    n = src.shape[0]
+    e2 = _sq_errors(src, dst, H0, np.empty(n))
+    mask = e2 <= thr2
+    H = H0.copy()
+    if not refine or mask.sum() < 4:
+        return H, mask, e2
+    cost = np.minimum(e2, thr2).sum()
+    for _ in range(rounds):
+        Hr, _sse = _lm_refine(src, dst, mask, H, 30)
+        if not np.isfinite(Hr).all():
+            break
+        e2r = _sq_errors(src, dst, Hr, np.empty(n))
+        cost_r = np.minimum(e2r, thr2).sum()
+        if cost_r > cost:
+            break
+        new_mask = e2r <= thr2
+        if new_mask.sum() < 4:
+            break
+        H = Hr
+        e2 = e2r
+        cost = cost_r
+        same = True
+        for i in range(n):
+            if new_mask[i] != mask[i]:
+                same = False
+                break
+        mask = new_mask
+        if same:
+            break
+    return H, mask, e2
+
+
 # ----------------------------------------------------------------------------------------------- public API
 
 
@@ -844,14 +927,17 @@ def find_homography(
         raise InputError(f"`lo_multiplier` must be >= 1, got {lo_multiplier!r}")
     if isinstance(lo_steps, bool) or not isinstance(lo_steps, (int, np.integer)) or lo_steps < 1:
         raise InputError(f"`lo_steps` must be an integer >= 1, got {lo_steps!r}")
-    _check_not_collinear("src", s)
-    _check_not_collinear("dst", d)
     gen = np.random.default_rng(rng)
     n = len(s)
     thr2 = float(threshold) ** 2
-    Ts, Td = hartley_normalization(s), hartley_normalization(d)
-    sn = np.ascontiguousarray(s @ Ts[:2, :2].T + Ts[:2, 2])
-    dn = np.ascontiguousarray(d @ Td[:2, :2].T + Td[:2, 2])
+    Ts, sn, ok_s = _normalize(s)
+    Td, dn, ok_d = _normalize(d)
+    for name, ok in (("src", ok_s), ("dst", ok_d)):
+        if not ok:
+            raise EstimationError(
+                f"all `{name}` points are collinear or coincident, so the homography is undetermined; "
+                "supply correspondences spread over a 2-D region"
+            )
     Tdi = np.linalg.inv(Td)
     best_H = np.zeros((3, 3))
     # best cost, best inliers, bound, iterations, degenerate samples, LO runs, SPRT eps, delta, A,
@@ -863,8 +949,7 @@ def find_homography(
     attempts, max_attempts, chunk = 0, 10 * int(max_iters) + 100, 256
     # the SPRT assumes the points are verified in random order; the caller's order may be sorted by quality
     perm = gen.permutation(n)
-    sp, dp = np.ascontiguousarray(s[perm]), np.ascontiguousarray(d[perm])
-    snp, dnp = np.ascontiguousarray(sn[perm]), np.ascontiguousarray(dn[perm])
+    sp, dp, snp, dnp = s[perm], d[perm], sn[perm], dn[perm]
     while state[3] < state[2] and attempts < max_attempts:
         k = int(min(chunk, max_attempts - attempts))
         u = gen.random((k, 4))
@@ -877,30 +962,12 @@ def find_homography(
             f"all {attempts} sampled 4-point sets were degenerate (collinear or orientation-flipping); "
             "the correspondences are nearly collinear or inconsistent"
         )
-    e2 = _sq_errors(s, d, best_H, np.empty(n))
-    mask = e2 <= thr2
+    H, mask, e2 = _finalize(s, d, best_H, thr2, bool(refine), 3)
     if mask.sum() < 4:
         raise EstimationError(
             f"no homography with at least 4 inliers within {threshold} px after {iterations} iterations; "
             "raise `threshold` or `max_iters`, or supply better matches"
         )
-    H = best_H.copy()
-    if refine:
-        cost = np.minimum(e2, thr2).sum()
-        for _ in range(3):
-            Hr, _sse = _lm_refine(s, d, mask, H, 30)
-            if not np.isfinite(Hr).all():
-                break
-            e2r = _sq_errors(s, d, Hr, np.empty(n))
-            cost_r = np.minimum(e2r, thr2).sum()
-            if cost_r > cost:
-                break
-            H, e2, cost = Hr, e2r, cost_r
-            new_mask = e2 <= thr2
-            if np.array_equal(new_mask, mask):
-                break
-            mask = new_mask
-        mask = e2 <= thr2
     H = _unit_h22(H)
     rms = float(np.sqrt(e2[mask].mean()))
     inl = mask.copy()
