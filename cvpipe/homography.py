@@ -976,6 +976,164 @@ def find_homography(
     return HomographyFit(H=H, inliers=inl, iterations=iterations, rms=rms)
 
 
+# ----------------------------------------------------------------------------------- matches and pictures
+
+
+def correspondences(gray_a: np.ndarray, gray_b: np.ndarray, detector: str = "sift", max_features: int = 4000,
+                    ratio: float = 0.8, cross_check: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Putative point correspondences A -> B from keypoints, descriptors and the ratio test.
+
+    Parameters
+    ----------
+    gray_a, gray_b : (H, W) uint8
+        The two views.
+    detector, max_features, ratio, cross_check
+        As in ``cvpipe.features.detect`` and ``cvpipe.matching.match``.
+
+    Returns
+    -------
+    src, dst : (M, 2) float64
+        Matched keypoint positions in A and in B (pixels), best descriptor distance first.
+    """
+    from . import features, matching
+
+    fa = features.detect(gray_a, detector, max_features)
+    fb = features.detect(gray_b, detector, max_features)
+    idx = matching.match(fa.descriptors, fb.descriptors, ratio, cross_check, fa.binary)
+    return fa.xy[idx[:, 0]].astype(np.float64), fb.xy[idx[:, 1]].astype(np.float64)
+
+
+def alignment_checkerboard(img_a: np.ndarray, img_b: np.ndarray, H_ab, tiles: int = 8) -> np.ndarray:
+    """B warped into A's frame by ``H_ab`` (A -> B), interleaved with A in a checkerboard to show misalignment.
+
+    Parameters
+    ----------
+    img_a, img_b : (H, W) or (H, W, 3) uint8
+        The two views (gray or BGR).
+    H_ab : (3, 3) array_like
+        Homography mapping A's pixels to B's.
+    tiles : int
+        Number of checkerboard squares along the longer side of A.
+
+    Returns
+    -------
+    (Ha, Wa, 3) uint8 BGR
+        Dark squares where the warped B does not cover A. Straight edges that continue across squares mean a
+        good alignment; steps at square borders are the residual error.
+    """
+    import cv2
+
+    H = np.asarray(H_ab, dtype=np.float64)
+    if H.shape != (3, 3) or not np.isfinite(H).all():
+        raise InputError(f"`H_ab` must be a finite (3, 3) array, got shape {H.shape}")
+    if isinstance(tiles, bool) or not isinstance(tiles, (int, np.integer)) or tiles < 1:
+        raise InputError(f"`tiles` must be an integer >= 1, got {tiles!r}")
+    a = img_a if img_a.ndim == 3 else cv2.cvtColor(img_a, cv2.COLOR_GRAY2BGR)
+    b = img_b if img_b.ndim == 3 else cv2.cvtColor(img_b, cv2.COLOR_GRAY2BGR)
+    h, w = a.shape[:2]
+    # sample B at H @ (x, y) for every pixel (x, y) of A
+    warped = cv2.warpPerspective(b, H, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                 borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    covered = cv2.warpPerspective(np.full(b.shape[:2], 255, np.uint8), H, (w, h),
+                                  flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP, borderValue=0) > 0
+    side = max(1, int(math.ceil(max(h, w) / tiles)))
+    yy, xx = np.mgrid[0:h, 0:w]
+    use_b = (((yy // side) + (xx // side)) % 2 == 1) & covered
+    out = np.where(use_b[..., None], warped, a)
+    out[~covered] = (a[~covered] // 3)
+    return out.astype(np.uint8)
+
+
+def alignment_panel(img_a: np.ndarray, img_b: np.ndarray, panels: dict, tiles: int = 8,
+                    width: int = 400) -> np.ndarray:
+    """Side-by-side :func:`alignment_checkerboard` pictures, one per labelled homography.
+
+    Parameters
+    ----------
+    img_a, img_b : uint8 images
+        The two views.
+    panels : dict
+        Label -> H (A -> B, (3, 3) array_like) or None (drawn as a grey "no result" panel).
+    tiles : int
+        Checkerboard squares along the longer side.
+    width : int
+        Width of each panel in pixels (A is resized keeping its aspect ratio).
+
+    Returns
+    -------
+    (h + 24, width * len(panels), 3) uint8 BGR
+        The panels with their labels in a bar above each.
+    """
+    import cv2
+
+    h = max(1, int(round(img_a.shape[0] * width / img_a.shape[1])))
+    cols = []
+    for label, H in panels.items():
+        if H is None:
+            pic = np.full((h, width, 3), 96, np.uint8)
+        else:
+            pic = cv2.resize(alignment_checkerboard(img_a, img_b, np.asarray(H, float), tiles), (width, h),
+                             interpolation=cv2.INTER_AREA)
+        bar = np.full((24, width, 3), 255, np.uint8)
+        cv2.putText(bar, str(label), (4, 17), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 1, cv2.LINE_AA)
+        cols.append(np.vstack([bar, pic]))
+    return np.hstack(cols)
+
+
+def summarize_methods(truth_pairs: list, runs: dict, success_px: float = 3.0) -> tuple[dict, dict]:
+    """Corner error against the truth, success rate, inliers and time per method.
+
+    Parameters
+    ----------
+    truth_pairs : list of dict
+        ``{"name", "H" (A -> B), "size_a": [w, h]}`` per pair.
+    runs : dict
+        Method -> pair name -> ``{"H" or None, "inliers", "matches", "time_ms"}``.
+    success_px : float
+        A pair succeeds when its corner error is at most this many pixels.
+
+    Returns
+    -------
+    metrics : dict
+        Method -> ``median_corner_error_px``, ``mean_corner_error_px`` (over successes), ``success_rate``,
+        ``pairs_within``, ``pairs``, ``median_inliers``, ``median_time_ms``, ``failures``.
+    per_pair : dict
+        Pair name -> method -> ``corner_error_px`` (None when the method failed), ``inliers``, ``matches``,
+        ``time_ms``.
+    """
+    from .metrics import corner_error
+
+    per_pair: dict = {}
+    metrics: dict = {}
+    for method, pairs in runs.items():
+        errs, inl, times, fails = [], [], [], 0
+        for q in truth_pairs:
+            r = pairs.get(q["name"], {"H": None, "inliers": 0, "matches": 0})
+            w, h = q["size_a"]
+            e = corner_error(r["H"], q["H"], int(w), int(h)) if r.get("H") is not None else float("inf")
+            fails += r.get("H") is None
+            errs.append(e)
+            inl.append(r.get("inliers", 0))
+            if r.get("time_ms") is not None:
+                times.append(r["time_ms"])
+            per_pair.setdefault(q["name"], {})[method] = {
+                "corner_error_px": e if np.isfinite(e) else None, "inliers": r.get("inliers", 0),
+                "matches": r.get("matches", 0), "time_ms": r.get("time_ms")}
+        errs_a = np.array(errs)
+        ok = errs_a <= success_px
+        metrics[method] = {
+            "median_corner_error_px": float(np.median(errs_a)) if len(errs_a) else None,
+            "mean_corner_error_px": float(errs_a[ok].mean()) if ok.any() else None,
+            "success_rate": float(ok.mean()) if len(ok) else None,
+            "pairs_within": int(ok.sum()),
+            "pairs": len(errs_a),
+            "median_inliers": float(np.median(inl)) if inl else None,
+            "median_time_ms": float(np.median(times)) if times else None,
+            "failures": int(fails),
+        }
+    return metrics, per_pair
+
+
 # --------------------------------------------------------------------------------------- method registry
 
 

@@ -183,3 +183,41 @@ SECTIONS: dict[str, type] = {
     "homography.features": FeaturesParams,
     "homography.match": MatchParams,
 }
+
+
+# ---- homography ----
+
+
+@dataclass(frozen=True)
+class HomographyEstimateParams:
+    """``homography.estimate``: robust homography from the matches (the same settings for every method)."""
+
+    threshold: float = 3.0
+    confidence: float = 0.999
+    max_iters: int = 10_000
+    seed: int = 0
+
+    def __post_init__(self):
+        _in_range("threshold", self.threshold, 0.0, None, lo_open=True)
+        _in_range("confidence", self.confidence, 0.0, 1.0, lo_open=True)
+        if self.confidence >= 1.0:
+            raise ValueError(f"`confidence` must be in (0, 1), got {self.confidence}")
+        _in_range("max_iters", self.max_iters, 1, 10_000_000)
+
+
+@dataclass(frozen=True)
+class HomographyReportParams:
+    """``homography.report``: success criterion and the alignment pictures."""
+
+    success_px: float = 3.0
+    checker_tiles: int = 8
+
+    def __post_init__(self):
+        _in_range("success_px", self.success_px, 0.0, None, lo_open=True)
+        _in_range("checker_tiles", self.checker_tiles, 1, 256)
+
+
+SECTIONS.update({
+    "homography.estimate": HomographyEstimateParams,
+    "homography.report": HomographyReportParams,
+})
