@@ -399,6 +399,121 @@ def _sq_errors(src, dst, H, out):
 
 
 @njit(cache=True)
+def _similarity(s, tx, ty):
+    """The 3x3 matrix [[s, 0, tx], [0, s, ty], [0, 0, 1]]."""
+    T = np.zeros((3, 3))
+    T[0, 0] = s
+    T[1, 1] = s
+    T[0, 2] = tx
+    T[1, 2] = ty
+    T[2, 2] = 1.0
+    return T
+
+
+@njit(cache=True)
+def _jacobi_eigh(M, V):
+    """Eigen-decomposition of a small symmetric matrix by cyclic Jacobi rotations (M is overwritten).
+
+    Returns the eigenvalues in ascending order; the columns of ``V`` become the matching unit eigenvectors.
+    Plain loops rather than ``np.linalg.eigh`` keep numba's compile time short; for 9x9 this is a few microseconds.
+    """
+    n = M.shape[0]
+    for i in range(n):
+        for j in range(n):
+            V[i, j] = 1.0 if i == j else 0.0
+    for sweep in range(50):
+        off = 0.0
+        for p in range(n):
+            for q in range(p + 1, n):
+                off += M[p, q] * M[p, q]
+        diag = 0.0
+        for p in range(n):
+            diag += M[p, p] * M[p, p]
+        if off <= 1e-30 * diag or off == 0.0:
+            break
+        for p in range(n):
+            for q in range(p + 1, n):
+                apq = M[p, q]
+                if apq == 0.0:
+                    continue
+                theta = (M[q, q] - M[p, p]) / (2.0 * apq)
+                tt = (1.0 if theta >= 0 else -1.0) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+                c = 1.0 / math.sqrt(tt * tt + 1.0)
+                s = tt * c
+                for k in range(n):
+                    mkp = M[k, p]
+                    mkq = M[k, q]
+                    M[k, p] = c * mkp - s * mkq
+                    M[k, q] = s * mkp + c * mkq
+                for k in range(n):
+                    mpk = M[p, k]
+                    mqk = M[q, k]
+                    M[p, k] = c * mpk - s * mqk
+                    M[q, k] = s * mpk + c * mqk
+                for k in range(n):
+                    vkp = V[k, p]
+                    vkq = V[k, q]
+                    V[k, p] = c * vkp - s * vkq
+                    V[k, q] = s * vkp + c * vkq
+    w = np.empty(n)
+    for i in range(n):
+        w[i] = M[i, i]
+    order = np.argsort(w)
+    Vs = V.copy()
+    ws = np.empty(n)
+    for j in range(n):
+        ws[j] = w[order[j]]
+        for i in range(n):
+            V[i, j] = Vs[i, order[j]]
+    return ws
+
+
+@njit(cache=True)
+def _cholesky_solve(A, b, x):
+    """Solve A x = b for a symmetric positive definite A (n x n) by Cholesky; False if A is not positive definite."""
+    n = A.shape[0]
+    L = np.zeros((n, n))
+    for j in range(n):
+        s = A[j, j]
+        for k in range(j):
+            s -= L[j, k] * L[j, k]
+        if not s > 0.0:
+            return False
+        L[j, j] = math.sqrt(s)
+        for i in range(j + 1, n):
+            s = A[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / L[j, j]
+    y = np.empty(n)
+    for i in range(n):
+        s = b[i]
+        for k in range(i):
+            s -= L[i, k] * y[k]
+        y[i] = s / L[i, i]
+    for i in range(n - 1, -1, -1):
+        s = y[i]
+        for k in range(i + 1, n):
+            s -= L[k, i] * x[k]
+        x[i] = s / L[i, i]
+    return True
+
+
+@njit(cache=True)
+def _lm_cost(p, xs, ys, us, vs, ws):
+    """Weighted sum of squared one-sided reprojection errors of the 8-parameter homography p (H[2, 2] = 1)."""
+    c = 0.0
+    for i in range(xs.shape[0]):
+        w = p[6] * xs[i] + p[7] * ys[i] + 1.0
+        if w == 0.0:
+            return np.inf
+        du = (p[0] * xs[i] + p[1] * ys[i] + p[2]) / w - us[i]
+        dv = (p[3] * xs[i] + p[4] * ys[i] + p[5]) / w - vs[i]
+        c += ws[i] * (du * du + dv * dv)
+    return c
+
+
+@njit(cache=True)
 def _lsq(src, dst, mask):
     """Hartley-normalized DLT on the masked correspondences via the 9x9 normal matrix; (H, ok)."""
     H = np.zeros((3, 3))
@@ -464,15 +579,16 @@ def _lsq(src, dst, mask):
             M[3 + a, 6 + b] = -Sv[k]
             M[6 + a, 3 + b] = -Sv[k]
             M[6 + a, 6 + b] = Suv[k]
-    w, V = np.linalg.eigh(M)
+    V = np.empty((9, 9))
+    w = _jacobi_eigh(M, V)
     if not (w[1] > 1e-14 * w[8]):
         return H, False
     Hn = np.empty((3, 3))
     for k in range(9):
         Hn[k // 3, k % 3] = V[k, 0]
     # H = inv(Td) @ Hn @ Ts
-    Ts = np.array([[ss, 0.0, -ss * cx], [0.0, ss, -ss * cy], [0.0, 0.0, 1.0]])
-    Tdi = np.array([[1.0 / sd, 0.0, cX], [0.0, 1.0 / sd, cY], [0.0, 0.0, 1.0]])
+    Ts = _similarity(ss, -ss * cx, -ss * cy)
+    Tdi = _similarity(1.0 / sd, cX, cY)
     tmp = np.empty((3, 3))
     _matmul3(Hn, Ts, tmp)
     _matmul3(Tdi, tmp, H)
@@ -695,10 +811,10 @@ def _lm_refine(src, dst, weight, H0, max_iter):
             vs[j] = (dst[i, 1] - cY) * sd
             ws[j] = weight[i]
             j += 1
-    Ts = np.array([[ss, 0.0, -ss * cx], [0.0, ss, -ss * cy], [0.0, 0.0, 1.0]])
-    Tsi = np.array([[1.0 / ss, 0.0, cx], [0.0, 1.0 / ss, cy], [0.0, 0.0, 1.0]])
-    Td = np.array([[sd, 0.0, -sd * cX], [0.0, sd, -sd * cY], [0.0, 0.0, 1.0]])
-    Tdi = np.array([[1.0 / sd, 0.0, cX], [0.0, 1.0 / sd, cY], [0.0, 0.0, 1.0]])
+    Ts = _similarity(ss, -ss * cx, -ss * cy)
+    Tsi = _similarity(1.0 / ss, cx, cy)
+    Td = _similarity(sd, -sd * cX, -sd * cY)
+    Tdi = _similarity(1.0 / sd, cX, cY)
     tmp = np.empty((3, 3))
     Hn = np.empty((3, 3))
     _matmul3(H0, Tsi, tmp)
@@ -716,23 +832,14 @@ def _lm_refine(src, dst, weight, H0, max_iter):
     for k in range(8):
         p[k] = Hn[k // 3, k % 3]
 
-    def cost_of(p):
-        c = 0.0
-        for i in range(n):
-            w = p[6] * xs[i] + p[7] * ys[i] + 1.0
-            if w == 0.0:
-                return np.inf
-            du = (p[0] * xs[i] + p[1] * ys[i] + p[2]) / w - us[i]
-            dv = (p[3] * xs[i] + p[4] * ys[i] + p[5]) / w - vs[i]
-            c += ws[i] * (du * du + dv * dv)
-        return c
-
-    cost = cost_of(p)
+    cost = _lm_cost(p, xs, ys, us, vs, ws)
     lam = 1e-3
     JtJ = np.zeros((8, 8))
     Jtr = np.zeros(8)
     J = np.zeros((2, 8))
     A = np.zeros((8, 8))
+    negJtr = np.empty(8)
+    delta = np.empty(8)
     rel = 0.0
     for it in range(max_iter):
         JtJ[:, :] = 0.0
@@ -775,9 +882,13 @@ def _lm_refine(src, dst, weight, H0, max_iter):
             A[:, :] = JtJ
             for a in range(8):
                 A[a, a] += lam * (JtJ[a, a] + 1e-12)
-            delta = np.linalg.solve(A, -Jtr)
+            for a in range(8):
+                negJtr[a] = -Jtr[a]
+            if not _cholesky_solve(A, negJtr, delta):
+                lam *= 10.0
+                continue
             pn = p + delta
-            cn = cost_of(pn)
+            cn = _lm_cost(pn, xs, ys, us, vs, ws)
             if cn < cost:
                 rel = (cost - cn) / max(cost, 1e-300)
                 p = pn
@@ -860,41 +971,62 @@ def _weights(e2, thr2, loss, out):
 
 
 @njit(cache=True)
+def _msac_cost(e2, thr2):
+    c = 0.0
+    for i in range(e2.shape[0]):
+        c += min(e2[i], thr2)
+    return c
+
+
+@njit(cache=True)
 def _finalize(src, dst, H0, thr2, refine, rounds, loss, wthr2):
     """Inliers of H0 and, with ``refine``, up to ``rounds`` of weighted Levenberg-Marquardt (weights from the
-    residuals of the previous round, see ``_weights``), keeping a round only if the MSAC cost does not grow.
-    Returns (H, inlier mask, squared errors)."""
+    residuals of the previous round, see ``_weights``); with hard inliers (loss 0) a round is kept only if the MSAC
+    cost does not grow. Returns (H, inlier mask, squared errors)."""
     n = src.shape[0]
     e2 = _sq_errors(src, dst, H0, np.empty(n))
-    mask = e2 <= thr2
+    mask = np.empty(n, np.bool_)
+    cnt = 0
+    for i in range(n):
+        mask[i] = e2[i] <= thr2
+        cnt += mask[i]
     H = H0.copy()
-    if not refine or mask.sum() < 4:
+    if not refine or cnt < 4:
         return H, mask, e2
-    cost = np.minimum(e2, thr2).sum()
+    cost = _msac_cost(e2, thr2)
     w = np.empty(n)
+    e2r = np.empty(n)
     for _ in range(rounds):
         _weights(e2, wthr2, loss, w)
-        if (w > 0).sum() < 4:
+        used = 0
+        for i in range(n):
+            used += w[i] > 0.0
+        if used < 4:
             break
         Hr, _sse = _lm_refine(src, dst, w, H, 30)
-        if not np.isfinite(Hr).all():
+        finite = True
+        for i in range(3):
+            for j in range(3):
+                finite = finite and math.isfinite(Hr[i, j])
+        if not finite:
             break
-        e2r = _sq_errors(src, dst, Hr, np.empty(n))
-        cost_r = np.minimum(e2r, thr2).sum()
-        if cost_r > cost * (1.0 + 1e-9) and loss == 0:
+        _sq_errors(src, dst, Hr, e2r)
+        cost_r = _msac_cost(e2r, thr2)
+        if loss == 0 and cost_r > cost * (1.0 + 1e-9):
             break
-        new_mask = e2r <= thr2
-        if new_mask.sum() < 4:
-            break
-        H = Hr
-        e2 = e2r
-        cost = cost_r
+        cnt_r = 0
         same = True
         for i in range(n):
-            if new_mask[i] != mask[i]:
-                same = False
-                break
-        mask = new_mask
+            m = e2r[i] <= thr2
+            cnt_r += m
+            same = same and (m == mask[i])
+        if cnt_r < 4:
+            break
+        H = Hr
+        cost = cost_r
+        for i in range(n):
+            e2[i] = e2r[i]
+            mask[i] = e2r[i] <= thr2
         if same and loss == 0:
             break
     return H, mask, e2
