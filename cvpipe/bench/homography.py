@@ -88,7 +88,8 @@ def real_pairs(root: Path, sets=SETS) -> list[dict]:
             with open(table, newline="") as fh:
                 for row in csv.DictReader(fh):
                     pairs.append({"set": "cmp", "name": row["name"], "a": base / row["imageA"],
-                                  "b": base / row["imageB"], "H": np.loadtxt(base / row["H_A_to_B_derived"])})
+                                  "b": base / row["imageB"], "H": np.loadtxt(base / row["H_A_to_B_derived"]),
+                                  "vpts": np.loadtxt(base / row["validation_pts_derived"]).reshape(-1, 4)})
     return pairs
 
 
@@ -124,21 +125,30 @@ def _timed(method: str, src, dst, seed: int, **kw) -> tuple[np.ndarray | None, i
     return H, inl, time.perf_counter() - w0, time.process_time() - c0
 
 
-def _run_all(src, dst, repeats: int, H_true, size, **kw) -> dict:
-    """Interleaved repeats of every method on one set of correspondences."""
+def _run_all(src, dst, repeats: int, H_true, size, vpts=None, **kw) -> dict:
+    """Interleaved repeats of every method on one set of correspondences.
+
+    ``vpts`` (K, 4) ``xA yA xB yB``: hand-clicked validation correspondences (CMP); their mean transfer error A -> B
+    is recorded as ``vpts_error_px`` (the corner error extrapolates far outside a plane that covers part of A).
+    """
     methods = list(METHODS)
-    rec = {m: {"err": [], "wall": [], "cpu": [], "inliers": []} for m in methods}
+    rec = {m: {"err": [], "wall": [], "cpu": [], "inliers": [], "vp": []} for m in methods}
     for r in range(repeats):
         order = methods[r % len(methods):] + methods[:r % len(methods)]
         for m in order:
             H, inl, wall, cpu = _timed(m, src, dst, seed=r, **kw)
             err = corner_error(H, H_true, *size) if H is not None else float("inf")
             rec[m]["err"].append(err)
+            if vpts is not None:
+                vp = (np.linalg.norm(transform_points(H, vpts[:, :2]) - vpts[:, 2:], axis=1).mean()
+                      if H is not None else float("inf"))
+                rec[m]["vp"].append(vp)
             rec[m]["wall"].append(wall)
             rec[m]["cpu"].append(cpu)
             rec[m]["inliers"].append(inl)
     return {m: {"corner_error_px": float(np.median(v["err"])), "time_ms": 1e3 * float(np.median(v["wall"])),
-                "cpu_ms": 1e3 * float(np.median(v["cpu"])), "inliers": int(np.median(v["inliers"]))}
+                "cpu_ms": 1e3 * float(np.median(v["cpu"])), "inliers": int(np.median(v["inliers"])),
+                "vpts_error_px": float(np.median(v["vp"])) if v["vp"] else None}
             for m, v in rec.items()}
 
 
@@ -168,10 +178,10 @@ def bench_real(root: Path, args) -> list[dict]:
         size = (a.shape[1], a.shape[0])
         row = {"set": p["set"], "pair": p["name"], "matches": len(src)}
         if len(src) < 4:
-            row["methods"] = {m: {"corner_error_px": float("inf"), "time_ms": None, "cpu_ms": None, "inliers": 0}
-                              for m in METHODS}
+            row["methods"] = {m: {"corner_error_px": float("inf"), "time_ms": None, "cpu_ms": None, "inliers": 0,
+                                  "vpts_error_px": float("inf") if "vpts" in p else None} for m in METHODS}
         else:
-            row["methods"] = _run_all(src, dst, args.repeats, p["H"], size, **kw)
+            row["methods"] = _run_all(src, dst, args.repeats, p["H"], size, p.get("vpts"), **kw)
         rows.append(row)
     return rows
 
@@ -211,6 +221,14 @@ def summarize(rows: list[dict], success_px: float) -> dict:
         times = [r["methods"][m]["time_ms"] for r in rows if r["methods"][m]["time_ms"] is not None]
         out[m] = {"median_corner_error_px": float(np.median(errs)), "pairs_within": int((errs <= success_px).sum()),
                   "pairs": len(errs), "median_time_ms": float(np.median(times)) if times else None}
+        vp = np.array([r["methods"][m]["vpts_error_px"] for r in rows if r["methods"][m]["vpts_error_px"] is not None])
+        if len(vp):
+            out[m]["cmp_median_vpts_error_px"] = float(np.median(vp))
+            out[m]["cmp_vpts_within"] = int((vp <= success_px).sum())
+            out[m]["cmp_pairs"] = len(vp)
+        better = sum(r["methods"][m]["corner_error_px"] < r["methods"]["opencv_magsac"]["corner_error_px"]
+                     for r in rows)
+        out[m]["pairs_better_than_magsac"] = int(better)
     return out
 
 
@@ -235,12 +253,23 @@ def markdown(result: dict) -> str:
             lines.append(f"| {r['set']} | {r['pair']} | {r['matches']} | "
                          + " | ".join(_f(r["methods"][m]["corner_error_px"]) for m in METHODS) + " | "
                          + " | ".join(_f(r["methods"][m]["time_ms"]) for m in METHODS) + " |")
+        cmp_rows = [r for r in result["real"] if r["methods"]["ours"].get("vpts_error_px") is not None]
+        if cmp_rows:
+            lines += ["", "CMP pairs: mean transfer error of the 8 hand-clicked validation points (px).", "",
+                      "| pair | " + " | ".join(names[m] for m in METHODS) + " |", "|---|" + "---:|" * len(METHODS)]
+            for r in cmp_rows:
+                lines.append(f"| {r['pair']} | " + " | ".join(_f(r["methods"][m]["vpts_error_px"]) for m in METHODS)
+                             + " |")
         s = result["summary"]
-        lines += ["", f"| method | median corner error (px) | pairs within {result['success_px']:g} px | "
-                      "median time (ms) |", "|---|---:|---:|---:|"]
+        px = f"{result['success_px']:g}"
+        lines += ["", f"| method | median corner error (px) | pairs within {px} px | pairs more accurate than MAGSAC | "
+                      f"CMP median validation-point error (px) | CMP within {px} px | median time (ms) |",
+                  "|---|---:|---:|---:|---:|---:|---:|"]
         for m in METHODS:
             lines.append(f"| {names[m]} | {_f(s[m]['median_corner_error_px'])} | {s[m]['pairs_within']} / "
-                         f"{s[m]['pairs']} | {_f(s[m]['median_time_ms'])} |")
+                         f"{s[m]['pairs']} | {s[m]['pairs_better_than_magsac'] if m != 'opencv_magsac' else '-'} | "
+                         f"{_f(s[m].get('cmp_median_vpts_error_px'))} | {s[m].get('cmp_vpts_within', '-')} / "
+                         f"{s[m].get('cmp_pairs', '-')} | {_f(s[m]['median_time_ms'])} |")
     if result.get("synthetic"):
         syn = result["synthetic"]
         lines += ["", f"Synthetic sweep: {syn[0]['points']} correspondences, 1 px noise, {syn[0]['trials']} scenes "
