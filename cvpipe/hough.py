@@ -40,12 +40,19 @@ __all__ = [
     "hough_grid",
     "hough_accumulator",
     "hough_lines",
+    "hough_lines_opencv",
+    "IMPLEMENTATIONS",
+    "get_impl",
     "hough_lines_probabilistic",
     "canny_edges",
     "line_cells",
     "cell_agreement",
     "line_segment_matches",
     "segment_segment_matches",
+    "truth_matches",
+    "draw_lines",
+    "draw_segments",
+    "median_seconds",
 ]
 
 
@@ -651,9 +658,19 @@ def canny_edges(gray: np.ndarray, low: float = 50.0, high: float = 150.0, *, ape
 # ------------------------------------------------------------------------------------------------- metrics
 
 
+def _as_lines(lines: np.ndarray) -> np.ndarray:
+    """``lines`` as a float64 (N, k) array with k >= 2 (an empty input becomes (0, 3))."""
+    arr = np.asarray(lines, np.float64)
+    if arr.size == 0:
+        return np.zeros((0, 3), np.float64)
+    if arr.ndim != 2 or arr.shape[1] < 2:
+        raise InputError(f"`lines` must have shape (N, 2) or (N, 3), got {arr.shape}")
+    return arr
+
+
 def line_cells(lines: np.ndarray, rho: float = 1.0, theta: float = np.pi / 180, min_theta: float = 0.0) -> np.ndarray:
     """Accumulator cell (angle index, rho index relative to rho = 0) of each line, shape (N, 2) int64."""
-    lines = np.asarray(lines, np.float64).reshape(-1, np.asarray(lines).shape[-1] if np.asarray(lines).size else 3)
+    lines = _as_lines(lines)
     rho32, theta32 = float(np.float32(rho)), float(np.float32(theta))
     n = np.rint((lines[:, 1] - float(np.float32(min_theta))) / theta32).astype(np.int64)
     r = np.rint(lines[:, 0] / rho32).astype(np.int64)
@@ -670,15 +687,17 @@ def cell_agreement(ours: np.ndarray, ref: np.ndarray, rho: float = 1.0, theta: f
         ``reproduced`` (count), ``ref_lines``, ``our_lines``, ``parity`` (reproduced / ref_lines; 1.0 when both are
         empty), ``same_votes`` (reproduced lines whose votes agree too), ``same_order`` (identical cell sequence).
     """
+    ours, ref = _as_lines(ours), _as_lines(ref)
     a = line_cells(ours, rho, theta, min_theta)
     b = line_cells(ref, rho, theta, min_theta)
     ours_map = {tuple(c): i for i, c in enumerate(a.tolist())}
+    votes = ours.shape[1] > 2 and ref.shape[1] > 2
     reproduced = same_votes = 0
     for j, c in enumerate(b.tolist()):
         i = ours_map.get(tuple(c))
         if i is not None:
             reproduced += 1
-            same_votes += int(np.asarray(ours)[i, 2] == np.asarray(ref)[j, 2]) if np.asarray(ref).shape[1] > 2 else 0
+            same_votes += int(votes and ours[i, 2] == ref[j, 2])
     parity = reproduced / len(b) if len(b) else (1.0 if len(a) == 0 else 0.0)
     return {"reproduced": reproduced, "ref_lines": len(b), "our_lines": len(a), "parity": parity,
             "same_votes": same_votes, "same_order": bool(len(a) == len(b) and np.array_equal(a, b))}
@@ -761,3 +780,108 @@ def segment_segment_matches(found: np.ndarray, segments: np.ndarray, dist_px: fl
     cover = np.clip(hi - lo, 0.0, None) >= min_overlap * glen
     ok = (d1 <= dist_px) & (d2 <= dist_px) & (ang <= np.deg2rad(angle_deg)) & cover
     return ok.any(axis=0)
+
+
+def truth_matches(lines: np.ndarray, truth: np.ndarray, rho_tol: float = 3.0, theta_tol: float = np.deg2rad(1.5)
+                  ) -> np.ndarray:
+    """Which true lines ``truth`` (M, 2) ``[rho, theta]`` a detected line (N, >=2) lies within tolerance of.
+
+    (rho, theta) and (-rho, theta - pi) are the same line, so lines near theta = 0 and theta = pi are compared both
+    ways. Returns (M,) bool.
+    """
+    truth = np.asarray(truth, np.float64).reshape(-1, 2)
+    lines = np.asarray(lines, np.float64)
+    if len(lines) == 0 or len(truth) == 0:
+        return np.zeros(len(truth), bool)
+    r, t = lines[:, 0][:, None], lines[:, 1][:, None]
+    dt = np.abs(t - truth[:, 1])
+    direct = (dt <= theta_tol) & (np.abs(r - truth[:, 0]) <= rho_tol)
+    flipped = (np.abs(dt - np.pi) <= theta_tol) & (np.abs(r + truth[:, 0]) <= rho_tol)
+    return (direct | flipped).any(axis=0)
+
+
+def draw_lines(image: np.ndarray, lines: np.ndarray, color: tuple[int, int, int] = (0, 0, 255),
+               thickness: int = 1) -> np.ndarray:
+    """A BGR copy of ``image`` with the infinite lines ``[rho, theta, ...]`` drawn across it."""
+    out = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) if image.ndim == 2 else image.copy()
+    reach = 2 * (out.shape[0] + out.shape[1])
+    for rho, theta in _as_lines(lines)[:, :2]:
+        c, s = math.cos(theta), math.sin(theta)
+        x0, y0 = rho * c, rho * s
+        p1 = (int(round(x0 - reach * s)), int(round(y0 + reach * c)))
+        p2 = (int(round(x0 + reach * s)), int(round(y0 - reach * c)))
+        cv2.line(out, p1, p2, color, thickness, cv2.LINE_AA)
+    return out
+
+
+def draw_segments(image: np.ndarray, segments: np.ndarray, color: tuple[int, int, int] = (0, 255, 0),
+                  thickness: int = 1) -> np.ndarray:
+    """A BGR copy of ``image`` with the segments ``[x1, y1, x2, y2]`` drawn on it."""
+    out = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) if image.ndim == 2 else image.copy()
+    for x1, y1, x2, y2 in np.asarray(segments, np.int64).reshape(-1, 4):
+        cv2.line(out, (int(x1), int(y1)), (int(x2), int(y2)), color, thickness, cv2.LINE_AA)
+    return out
+
+
+def median_seconds(fn, repeats: int = 5, warmup: int = 1) -> float:
+    """Median wall time of ``fn()`` over ``repeats`` calls after ``warmup`` untimed calls, in seconds."""
+    import time
+
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
+def compare_runs(ours: dict, opencv: dict, truth: dict | None = None, rho_tol: float = 3.0,
+                 theta_tol: float = np.deg2rad(1.5)) -> dict:
+    """Agreement, time ratio and truth recall of two ``hough_lines`` stage results (see ``stages/hough_lines.py``).
+
+    Parameters
+    ----------
+    ours, opencv : dict
+        ``{"rho", "theta", "images": [{"file", "lines": [[rho, theta, votes]], "seconds"}]}`` per implementation.
+    truth : dict or None
+        ``{"images": [{"file", "lines": [[rho, theta]]}]}``; files are matched by stem.
+
+    Returns
+    -------
+    dict
+        ``per_image`` entries and the summary: ``parity_min``/``parity_mean`` (share of OpenCV's lines in the same
+        cell), ``identical_images`` (same lines, votes and order), ``time_ratio_median`` (ours / opencv seconds) and,
+        with ``truth``, ``recall_ours``/``recall_opencv`` (true lines found within the tolerances).
+    """
+    from pathlib import PurePath
+
+    stem = lambda name: PurePath(name).stem  # noqa: E731 - edge maps are PNGs of the same stem as the samples
+    ref = {stem(i["file"]): i for i in opencv["images"]}
+    true = {stem(i["file"]): i["lines"] for i in (truth or {"images": []})["images"]}
+    rows, found = [], {"ours": [], "opencv": []}
+    for mine in ours["images"]:
+        name = stem(mine["file"])
+        if name not in ref:
+            raise InputError(f"image {name!r} is in ours but not in the opencv run")
+        a, b = _as_lines(mine["lines"]), _as_lines(ref[name]["lines"])
+        agree = cell_agreement(a, b, ours["rho"], ours["theta"])
+        row = {"file": name, **agree, "identical": bool(a.shape == b.shape and np.array_equal(a, b)),
+               "time_ratio": mine["seconds"] / ref[name]["seconds"] if ref[name]["seconds"] > 0 else float("nan")}
+        if name in true:
+            for key, lines in (("ours", a), ("opencv", b)):
+                hit = truth_matches(lines, true[name], rho_tol, theta_tol)
+                row[f"truth_found_{key}"] = int(hit.sum())
+                found[key].append(hit)
+            row["truth_lines"] = len(true[name])
+        rows.append(row)
+    parity = [r["parity"] for r in rows]
+    out = {"images": len(rows), "parity_min": min(parity, default=1.0), "parity_mean": float(np.mean(parity or [1.0])),
+           "identical_images": sum(r["identical"] for r in rows),
+           "time_ratio_median": float(np.median([r["time_ratio"] for r in rows])) if rows else float("nan"),
+           "per_image": rows}
+    for key, hits in found.items():
+        if hits:
+            out[f"recall_{key}"] = float(np.concatenate(hits).mean())
+    return out
