@@ -120,12 +120,6 @@ class HoughGrid:
         """Index of the rho bin of rho = 0."""
         return (self.numrho - 1) // 2
 
-    @property
-    def wraps(self) -> bool:
-        """True when the angle bins cover [0, pi) exactly, so angle -1 is angle ``numangle - 1`` with rho negated."""
-        t = float(np.float32(self.theta))
-        return self.min_theta == 0.0 and abs(math.pi - self.numangle * t) < t / 2
-
     def rhos(self, r: np.ndarray) -> np.ndarray:
         """rho in pixels (float32) of rho bin indices ``r``."""
         return (np.asarray(r, np.int64) - self.center).astype(np.float32) * np.float32(self.rho)
@@ -348,34 +342,47 @@ def hough_accumulator(edges: np.ndarray, grid: HoughGrid, parallel: bool | None 
     return _vote_serial(xs, ys, grid.tab_cos, grid.tab_sin, grid.numrho)
 
 
-def _refine(acc: np.ndarray, grid: HoughGrid, ns: np.ndarray, rs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Sub-bin (rho, theta) by a parabola through each peak and its two neighbours along each axis."""
-
-    def offset(a, b, c):
-        den = a - 2.0 * b + c
-        with np.errstate(divide="ignore", invalid="ignore"):
-            d = np.where(den < 0, 0.5 * (a - c) / den, 0.0)
-        return np.clip(d, -0.5, 0.5)
-
-    a = acc.astype(np.float64)
-    n1, r1 = ns + 1, rs + 1
-    d_r = offset(a[n1, r1 - 1], a[n1, r1], a[n1, r1 + 1])
-    below, above = a[n1 - 1, r1].copy(), a[n1 + 1, r1].copy()
-    if grid.wraps:
-        # angle -1 is angle numangle-1 with rho negated, and angle numangle is angle 0 with rho negated
-        mirror = 2 * grid.center - rs
-        ok = (mirror >= 0) & (mirror < grid.numrho)
-        first, last = (ns == 0) & ok, (ns == grid.numangle - 1) & ok
-        below[first] = a[grid.numangle, mirror[first] + 1]
-        above[last] = a[1, mirror[last] + 1]
-    d_n = offset(below, a[n1, r1], above)
-    rho = (rs + d_r - grid.center) * grid.rho
-    theta = grid.min_theta + (ns + d_n) * grid.theta
-    if grid.wraps:
-        neg, over = theta < 0, theta >= np.pi
-        theta = np.where(neg, theta + np.pi, np.where(over, theta - np.pi, theta))
-        rho = np.where(neg | over, -rho, rho)
-    return rho, theta
+@njit(cache=True)
+def _refine_fit(xs, ys, rhos, thetas, band, iterations):
+    """Total-least-squares line through the edge pixels within ``band`` px of each line; (rho, theta) float64."""
+    out_r = rhos.copy()
+    out_t = thetas.copy()
+    for i in range(rhos.shape[0]):
+        rho, theta = rhos[i], thetas[i]
+        for _ in range(iterations):
+            c, s = math.cos(theta), math.sin(theta)
+            cnt = 0
+            sx = sy = 0.0
+            for k in range(xs.shape[0]):
+                if abs(xs[k] * c + ys[k] * s - rho) <= band:
+                    cnt += 1
+                    sx += xs[k]
+                    sy += ys[k]
+            if cnt < 3:
+                break
+            mx, my = sx / cnt, sy / cnt
+            cxx = cyy = cxy = 0.0
+            for k in range(xs.shape[0]):
+                if abs(xs[k] * c + ys[k] * s - rho) <= band:
+                    dx, dy = xs[k] - mx, ys[k] - my
+                    cxx += dx * dx
+                    cyy += dy * dy
+                    cxy += dx * dy
+            # the normal is the eigenvector of the smaller eigenvalue of the scatter matrix
+            phi = 0.5 * math.atan2(2.0 * cxy, cxx - cyy)  # direction of the line
+            new_t = phi + 0.5 * math.pi
+            # keep the normal on the side of the detected one, then bring theta into [0, pi)
+            if math.cos(new_t - theta) < 0:
+                new_t += math.pi
+            new_r = mx * math.cos(new_t) + my * math.sin(new_t)
+            new_t = new_t % (2.0 * math.pi)
+            if new_t >= math.pi:
+                new_t -= math.pi
+                new_r = -new_r
+            rho, theta = new_r, new_t
+        out_r[i] = rho
+        out_t[i] = theta
+    return out_r, out_t
 
 
 def hough_lines(
@@ -407,8 +414,9 @@ def hough_lines(
     max_lines : int or None
         Keep only the first ``max_lines`` lines (OpenCV's C++ ``linesMax``; Python's cv2 has no cap).
     refine : bool
-        Replace (rho, theta) by the sub-bin peak of a parabola fitted along each accumulator axis (votes unchanged).
-        The result then no longer sits on the cell centres that ``cv2.HoughLines`` reports.
+        Replace each line's (rho, theta) by the total-least-squares line through the edge pixels within
+        max(1.5, rho) px of it (two rounds; votes unchanged). Sub-bin accurate, but no longer the cell centres that
+        ``cv2.HoughLines`` reports; theta stays in [0, pi).
     parallel : bool or None
         Vote on all numba threads (``numba.set_num_threads`` limits them), on one (False), or decide from the load
         average (None). The result is the same.
@@ -428,10 +436,12 @@ def hough_lines(
     ns, rs, votes = _peaks(acc, threshold)
     if max_lines is not None:
         ns, rs, votes = ns[:max_lines], rs[:max_lines], votes[:max_lines]
-    if refine:
-        rho_out, theta_out = _refine(acc, grid, ns, rs)
-    else:
-        rho_out, theta_out = grid.rhos(rs), grid.thetas(ns)
+    rho_out, theta_out = grid.rhos(rs), grid.thetas(ns)
+    if refine and len(ns):
+        xs, ys = _edge_points(edges)
+        band = max(1.5, grid.rho)
+        rho_out, theta_out = _refine_fit(xs.astype(np.float64), ys.astype(np.float64), rho_out.astype(np.float64),
+                                         theta_out.astype(np.float64), band, 2)
     out = np.empty((len(votes), 3), np.float64)
     out[:, 0] = rho_out
     out[:, 1] = theta_out
