@@ -15,8 +15,10 @@
 - output ``rho = (r - (numrho - 1) // 2) * rho`` and ``theta = min_theta + n * theta`` in float32. The integer
   division is OpenCV >= 4.13 / 5.0 (PR #27992); before it, the centre was ``(numrho - 1) * 0.5``.
 
-The voting kernel is numba, parallel over angles (each thread owns whole accumulator rows, so there are no write
-races), with cached compilation. ``hough_lines_probabilistic`` is our progressive probabilistic Hough transform
+The voting kernel is numba with cached compilation: per angle, the rho bins of all edge pixels are computed in one
+vectorised pass, then counted into four interleaved histograms (so consecutive increments of the same bin do not
+wait on each other). Blocks of angles run on parallel threads when a core is free; each thread owns whole
+accumulator rows, so there are no write races. ``hough_lines_probabilistic`` is our progressive probabilistic Hough transform
 (Matas et al. 2000) returning segments like ``cv2.HoughLinesP``; it is seeded and reproducible but, like OpenCV's,
 its result depends on the random point order, so it is not expected to match OpenCV's segment for segment.
 """
