@@ -95,7 +95,7 @@ def _check_int(name: str, value: int, lo: int) -> int:
 # ------------------------------------------------------------------------------------------------- geometry
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class HoughGrid:
     """The accumulator geometry that ``cv2.HoughLines`` uses for an image of the given size.
 
