@@ -38,6 +38,8 @@ SUMMARY_KEYS = {"task": str, "title": str, "description": str, "pictures": list,
 #: picture formats every browser shows
 PICTURE_SUFFIXES = (".png", ".jpg", ".jpeg")
 _CELL_TYPES = (str, int, float, bool, type(None))
+#: width / height from which a picture gets a whole row of the grid
+WIDE_ASPECT = 2.0
 
 CSS = """
 :root { --fg: #1d232b; --muted: #5b6570; --line: #d9dee4; --accent: #1f6feb; --bg: #ffffff; --soft: #f4f6f8; }
@@ -53,9 +55,12 @@ a { color: var(--accent); }
 nav ol { padding-left: 1.4rem; margin: .4rem 0; }
 nav li { margin: .15rem 0; }
 .notrun { color: var(--muted); font-style: italic; }
-.grid { display: grid; grid-template-columns: repeat(auto-fill, minmax(260px, 1fr)); gap: 1rem; margin: .8rem 0; }
+.grid { display: grid; grid-template-columns: repeat(auto-fill, minmax(260px, 1fr)); gap: 1rem; margin: .8rem 0;
+        align-items: start; }
+figure.wide { grid-column: 1 / -1; }
 figure { margin: 0; background: var(--soft); border: 1px solid var(--line); border-radius: 6px; padding: .5rem; }
-figure img { display: block; width: 100%; height: auto; border-radius: 3px; background: #fff; }
+figure img { display: block; width: 100%; height: auto; max-height: 75vh; object-fit: contain;
+             border-radius: 3px; background: #fff; }
 figcaption { font-size: .85rem; color: var(--muted); margin-top: .35rem; }
 .tablewrap { overflow-x: auto; }
 table { border-collapse: collapse; margin: .3rem 0 1rem; font-size: .9rem; }
@@ -262,7 +267,7 @@ def _timings(timings: Mapping[str, float]) -> list[str]:
     return out
 
 
-def _section(s: Mapping[str, Any], base: str) -> list[str]:
+def _section(s: Mapping[str, Any], base: str, sizes: Mapping[str, tuple[int, int]]) -> list[str]:
     task = s["task"]
     out = [f'<section id="task-{_e(task)}">', f"<h2>{_e(TASK_NAMES[task])}</h2>",
            f'<p class="title">{_e(s["title"])}</p>', f"<p>{_e(s['description'])}</p>"]
@@ -271,7 +276,12 @@ def _section(s: Mapping[str, Any], base: str) -> list[str]:
         for pic in s["pictures"]:
             href = _e(picture_href(pic["path"], base))
             cap = _e(pic["caption"])
-            out.append(f'<figure><a href="{href}"><img src="{href}" alt="{cap}"></a>'
+            size, wide = "", ""
+            if pic["path"] in sizes:
+                w, h = sizes[pic["path"]]
+                size = f' width="{int(w)}" height="{int(h)}"'  # the browser reserves the space before decoding
+                wide = ' class="wide"' if w >= WIDE_ASPECT * h else ""
+            out.append(f'<figure{wide}><a href="{href}"><img src="{href}"{size} alt="{cap}"></a>'
                        f"<figcaption>{cap}</figcaption></figure>")
         out.append("</div>")
     for table in s["tables"]:
@@ -281,7 +291,11 @@ def _section(s: Mapping[str, Any], base: str) -> list[str]:
     return out
 
 
-def build_html(summaries: Iterable[Mapping[str, Any]], base: str = "outputs") -> str:
+def build_html(
+    summaries: Iterable[Mapping[str, Any]],
+    base: str = "outputs",
+    sizes: Mapping[str, tuple[int, int]] | None = None,
+) -> str:
     """The report page of the given task summaries.
 
     Parameters
@@ -290,6 +304,9 @@ def build_html(summaries: Iterable[Mapping[str, Any]], base: str = "outputs") ->
         Task summaries that passed :func:`validate_summary`, at most one per task, in any order.
     base : str
         Repo-relative folder the page is written to; picture links are made relative to it.
+    sizes : mapping, optional
+        Picture path -> (width, height) in pixels. Known sizes become the <img> width/height attributes, and a
+        picture at least :data:`WIDE_ASPECT` times wider than high (a panorama) spans the whole row.
 
     Returns
     -------
@@ -319,7 +336,7 @@ def build_html(summaries: Iterable[Mapping[str, Any]], base: str = "outputs") ->
     ]
     for task in TASKS:
         if task in present:
-            body += _section(present[task], base)
+            body += _section(present[task], base, sizes or {})
     body += ["<footer>Written by the <code>report</code> stage (<code>dvc repro report</code>) from "
              "<code>outputs/&lt;task&gt;/summary.json</code>; curves and bars: <code>dvc plots show</code>.</footer>",
              "</main>"]

@@ -66,7 +66,7 @@ BAD = [
     (lambda s: s.update(description=3), r"`description` must be a JSON string"),
     (lambda s: s["pictures"].append({"path": "x.png"}), r"`pictures\[1\]` must be an object with keys"),
     (lambda s: s["pictures"].append({"path": 3, "caption": "c"}), r"`pictures\[1\]` must have string"),
-    (lambda s: s["pictures"].append({"path": "/tmp/x.png", "caption": ""}), r"`pictures\[1\]\.path` must be a path rel"),
+    (lambda s: s["pictures"].append({"path": "/tmp/x.png", "caption": ""}), r"`pictures\[1\]\.path` must be a path"),
     (lambda s: s["pictures"].append({"path": "outputs/../../x.png", "caption": ""}), r"relative to the repository"),
     (lambda s: s["pictures"].append({"path": "outputs\\x.png", "caption": ""}), r"relative to the repository"),
     (lambda s: s["pictures"].append({"path": "outputs/x.tiff", "caption": ""}), r"must be a PNG or JPEG file"),
@@ -137,6 +137,16 @@ def test_picture_links_are_relative_to_the_page_and_url_quoted():
     assert [a["src"] for t, a in deeper.tags if t == "img"][0] == "../hough/lines%20%231.png"
 
 
+def test_known_sizes_become_img_attributes_and_wide_pictures_span_the_row():
+    s = summary("panorama", ["outputs/panorama/ours.png", "outputs/panorama/input.jpg", "outputs/panorama/x.png"])
+    sizes = {"outputs/panorama/ours.png": (1200, 400), "outputs/panorama/input.jpg": (640, 480)}
+    doc = parse(report.build_html([s], sizes=sizes))
+    imgs = [a for t, a in doc.tags if t == "img"]
+    assert [(a.get("width"), a.get("height")) for a in imgs] == [("1200", "400"), ("640", "480"), (None, None)]
+    figures = [a.get("class") for t, a in doc.tags if t == "figure"]
+    assert figures == ["wide", None, None]  # 1200 / 400 = 3 >= WIDE_ASPECT; 640 / 480 is not; unknown stays
+
+
 def test_page_loads_nothing_from_the_network():
     page = report.build_html([summary(t, [f"outputs/{t}/a.png"]) for t in report.TASKS])
     doc = parse(page)
@@ -184,6 +194,8 @@ def test_stage_renders_every_summary_and_the_timing_plot_data(tmp_path, monkeypa
     run_stage(monkeypatch, tmp_path)
     page = (tmp_path / "outputs/report.html").read_text(encoding="utf-8")
     srcs = [a["src"] for t, a in parse(page).tags if t == "img"]
+    sizes = [(a["width"], a["height"]) for t, a in parse(page).tags if t == "img"]
+    assert sizes == [("320", "200"), ("160", "240")] * 2  # read from the files the fixture wrote
     assert len(srcs) == 4 and all((tmp_path / "outputs" / re.sub("%20", " ", re.sub("%23", "#", s))).is_file()
                                   for s in srcs)
     rows = io.load_json(tmp_path / "outputs/plots/timings.json")
@@ -207,6 +219,14 @@ def test_stage_names_the_file_whose_picture_is_missing(tmp_path, monkeypatch):
                                          r"'outputs/hough/result\.png' does not exist"):
         run_stage(monkeypatch, tmp_path)
     assert not (tmp_path / "outputs/report.html").exists()
+
+
+def test_stage_names_the_summary_and_the_picture_that_is_not_an_image(tmp_path, monkeypatch):
+    make_outputs(tmp_path, ("hough",))
+    (tmp_path / "outputs/hough/result.png").write_bytes(b"not a png")
+    with pytest.raises(SystemExit, match=r"outputs/hough/summary\.json: picture outputs/hough/result\.png: not a "
+                                         r"readable image"):
+        run_stage(monkeypatch, tmp_path)
 
 
 def test_stage_names_the_file_whose_task_is_in_the_wrong_folder(tmp_path, monkeypatch):
