@@ -897,3 +897,57 @@ def compare_runs(ours: dict, opencv: dict, truth: dict | None = None, rho_tol: f
         if hits:
             out[f"recall_{key}"] = float(np.concatenate(hits).mean())
     return out
+
+
+def report_summary(metrics: dict, ours: dict, opencv: dict, pictures: list[dict]) -> dict:
+    """The report page's summary of the hough task (schema in ``cvpipe.report``), from ``compare_runs`` output.
+
+    Parameters
+    ----------
+    metrics : dict
+        ``compare_runs(ours, opencv, truth)``.
+    ours, opencv : dict
+        The two ``hough_lines`` stage results (for the parameters and the per-image seconds).
+    pictures : list of dict
+        ``{"path", "caption"}`` overlays, repo-relative paths.
+    """
+    rows = metrics["per_image"]
+    seconds = {k: float(sum(i["seconds"] for i in run["images"])) for k, run in (("ours", ours), ("opencv", opencv))}
+    methods = []
+    for key in ("ours", "opencv"):
+        recall = metrics.get(f"recall_{key}")
+        methods.append([key, int(sum(r["our_lines" if key == "ours" else "ref_lines"] for r in rows)),
+                        metrics["parity_min"] if key == "ours" else 1.0,
+                        None if recall is None else round(recall, 4), round(1e3 * seconds[key], 3)])
+    per_image = [[r["file"], r["ref_lines"], r["reproduced"], r["identical"], round(r["time_ratio"], 3),
+                  r.get("truth_found_ours"), r.get("truth_found_opencv"), r.get("truth_lines")] for r in rows]
+    return {
+        "task": "hough",
+        "title": "Our standard Hough transform against cv2.HoughLines at identical parameters",
+        "description": (
+            f"Canny edges of each sample image, then both transforms with rho {ours['rho']:g} px, theta "
+            f"{math.degrees(ours['theta']):g} deg, threshold {ours['threshold']}. Ours reproduces "
+            f"{metrics['identical_images']} of {metrics['images']} images exactly (same cells, votes and order); its "
+            f"median time is {metrics['time_ratio_median']:.2f} x OpenCV's (the two stages timed separately, "
+            "`cvpipe bench hough` interleaves them). Overlays: ours in red (left), OpenCV's in green (right)."),
+        "pictures": pictures,
+        "tables": [
+            {"title": "Per method (all sample images)",
+             "columns": ["method", "lines", "share of OpenCV's lines reproduced (min over images)",
+                         "recall of true lines", "total of median times (ms)"],
+             "rows": methods},
+            {"title": "Per image",
+             "columns": ["image", "OpenCV lines", "reproduced by ours", "identical output", "time ours / OpenCV",
+                         "true lines found (ours)", "true lines found (OpenCV)", "true lines"],
+             "rows": per_image},
+        ],
+        "timings": seconds,
+    }
+
+
+def time_plot(ours: dict, opencv: dict) -> list[dict]:
+    """``dvc plots`` rows ``{"label": "<image> <impl>", "ms"}``: median time per image and implementation."""
+    from pathlib import PurePath
+
+    return [{"label": f"{PurePath(i['file']).stem} {key}", "ms": round(1e3 * i["seconds"], 4)}
+            for key, run in (("ours", ours), ("opencv", opencv)) for i in run["images"]]

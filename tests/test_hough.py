@@ -257,6 +257,22 @@ def test_compare_runs_summary():
         hough.compare_runs(ours, {**ref, "images": []})
 
 
+def test_report_summary_is_valid_for_the_report_page():
+    from cvpipe.report import validate_summary
+
+    lines = [[10.0, 0.0, 50.0], [20.0, 1.0, 40.0]]
+    run = lambda secs: {"rho": 1.0, "theta": math.pi / 180, "threshold": 30,  # noqa: E731
+                        "images": [{"file": "a.png", "lines": lines, "seconds": secs}]}
+    ours, ref = run(0.002), run(0.004)
+    metrics = hough.compare_runs(ours, ref, {"images": [{"file": "a.png", "lines": [[10.0, 0.0]]}]})
+    summary = hough.report_summary(metrics, ours, ref, [{"path": "outputs/hough/overlays/a.png", "caption": "a"}])
+    validate_summary(summary, "hough summary")
+    assert summary["timings"] == {"ours": 0.002, "opencv": 0.004}
+    assert summary["tables"][0]["rows"][0][:4] == ["ours", 2, 1.0, 1.0]
+    plot = hough.time_plot(ours, ref)
+    assert plot == [{"label": "a ours", "ms": 2.0}, {"label": "a opencv", "ms": 4.0}]
+
+
 def test_draw_lines_marks_the_line():
     img = np.zeros((40, 60), np.uint8)
     out = hough.draw_lines(img, [[20.0, 0.0, 9]], (0, 0, 255))
