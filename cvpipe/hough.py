@@ -192,8 +192,13 @@ def _grid(h: int, w: int, rho: float, theta: float, min_theta: float, max_theta:
 def _edge_points(edges):
     """Coordinates (float32 x, float32 y) of the nonzero pixels in row-major order."""
     h, w = edges.shape
-    xs = np.empty(h * w, np.float32)
-    ys = np.empty(h * w, np.float32)
+    count = 0
+    for i in range(h):
+        for j in range(w):
+            count += edges[i, j] != 0
+    # counted first: an (H * W) buffer would cost 8 bytes per pixel of a large, sparse edge map
+    xs = np.empty(count, np.float32)
+    ys = np.empty(count, np.float32)
     k = 0
     for i in range(h):
         for j in range(w):
@@ -201,7 +206,7 @@ def _edge_points(edges):
                 xs[k] = j
                 ys[k] = i
                 k += 1
-    return xs[:k].copy(), ys[:k].copy()
+    return xs, ys
 
 
 @njit(cache=True)
