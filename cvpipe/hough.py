@@ -28,6 +28,7 @@ from __future__ import annotations
 import functools
 import math
 import os
+import time
 from dataclasses import dataclass
 
 import cv2
@@ -314,13 +315,18 @@ def _use_parallel(parallel: bool | None) -> bool:
     """
     if parallel is not None:
         return bool(parallel)
-    if numba.get_num_threads() < 2:
-        return False
-    try:
-        load = os.getloadavg()[0]
-    except OSError:  # pragma: no cover - platforms without a load average
-        return True
-    return load <= (os.cpu_count() or 1) - 0.5
+    now = time.monotonic()
+    if now - _AUTO_PARALLEL[0] > 1.0:  # asking costs ~0.1 ms, so at most once a second
+        try:
+            spare = os.getloadavg()[0] <= (os.cpu_count() or 1) - 0.5
+        except OSError:  # pragma: no cover - platforms without a load average
+            spare = True
+        _AUTO_PARALLEL[:] = [now, spare and numba.get_num_threads() >= 2]
+    return bool(_AUTO_PARALLEL[1])
+
+
+#: [time of the last look (monotonic s), whether to vote in parallel]
+_AUTO_PARALLEL: list = [-math.inf, False]
 
 
 def hough_accumulator(edges: np.ndarray, grid: HoughGrid, parallel: bool | None = None) -> np.ndarray:
@@ -842,8 +848,6 @@ def draw_segments(image: np.ndarray, segments: np.ndarray, color: tuple[int, int
 
 def median_seconds(fn, repeats: int = 5, warmup: int = 1) -> float:
     """Median wall time of ``fn()`` over ``repeats`` calls after ``warmup`` untimed calls, in seconds."""
-    import time
-
     for _ in range(warmup):
         fn()
     times = []
