@@ -641,7 +641,7 @@ def hough_lines_probabilistic(
     npts = int(np.count_nonzero(edges))
     order = rng.permutation(npts).astype(np.int64)
     return _ppht(edges, order, grid.tab_cos, grid.tab_sin, grid.numrho, threshold,
-                 float(min_line_length), int(math.floor(max_line_gap)), max_lines)
+                 float(min_line_length), int(math.floor(max_line_gap)), min(max_lines, max(npts, 1)))
 
 
 # ------------------------------------------------------------------------------------------------- edges

@@ -200,6 +200,9 @@ def test_probabilistic_is_reproducible_and_respects_min_length():
     assert len(a) > 0
     extent = np.maximum(np.abs(a[:, 2] - a[:, 0]), np.abs(a[:, 3] - a[:, 1]))
     assert extent.min() >= 25
+    capped = hough.hough_lines_probabilistic(edges, threshold=20, min_line_length=25, max_line_gap=2, rng=11,
+                                             max_lines=2)
+    np.testing.assert_array_equal(capped, a[:2])  # the same visiting order, stopped after two segments
 
 
 # ------------------------------------------------------------------------------------------------ metrics
