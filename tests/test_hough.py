@@ -426,3 +426,24 @@ def test_cli_bad_arguments_exit_2(line_photo, capsys, argv, message):
 def test_cli_missing_file_exits_2(tmp_path, capsys):
     assert cli.main(["hough", str(tmp_path / "none.png")]) == 2
     assert "no such file" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------------------------ benchmark
+
+
+def test_bench_without_york_data_exits_2(tmp_path, capsys):
+    assert cli.main(["bench", "hough", "--data", str(tmp_path)]) == 2
+    assert "no York Urban images found" in capsys.readouterr().err
+
+
+def test_bench_on_two_york_images(data_root, capsys):
+    if not (data_root / "yorkurban_lines" / "images").is_dir():
+        pytest.skip("York Urban images not found")
+    assert cli.main(["bench", "hough", "--data", str(data_root), "--limit", "2", "--repeats", "1", "--no-compile",
+                     "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)["summary"]
+    # identical parameters give identical lines (the parity target is >= 99 % on every image)
+    assert s["images"] == 2 and s["parity_min"] == 1.0 and s["images_identical"] == 2
+    # the same lines find the same ground-truth segments
+    assert s["recall"]["ours"] == s["recall"]["opencv"]
+    assert s["gt_segments"] > 0 and 0.0 < s["recall"]["ours"] <= 1.0
