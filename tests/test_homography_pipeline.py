@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -144,20 +145,23 @@ def test_estimate_and_report_stages(tmp_path, pair_files):
     io.save_json(truth, {"pairs": [{"name": "p", "a": "p_a.png", "b": "p_b.png", "H": H_AB, "size_a": [w, h]}]})
     src, dst = correspondences(io.read_image(a, "gray"), io.read_image(b, "gray"))
     io.save_npz(tmp_path / "matches" / "p.npz", src=src, dst=dst)
-    params = tmp_path / "params.yaml"
-    params.write_text((ROOT / "params.yaml").read_text())
-    env_py = [sys.executable, "-m"]
+    (tmp_path / "params.yaml").write_text((ROOT / "params.yaml").read_text())
+    # run from tmp_path with relative paths, as dvc runs them from the repository root
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    run = [sys.executable, "-m"]
     for method in ("ours", "opencv_magsac"):
-        subprocess.run(env_py + ["stages.homography_estimate", "--truth", str(truth), "--matches",
-                                 str(tmp_path / "matches"), "--method", method, "--out", str(tmp_path / "est" / method),
-                                 "--params", str(params)], check=True, cwd=ROOT)
-    subprocess.run(env_py + ["stages.homography_report", "--truth", str(truth), "--images", str(images),
-                             "--estimates", str(tmp_path / "est" / "ours"), str(tmp_path / "est" / "opencv_magsac"),
-                             "--metrics", str(tmp_path / "metrics.json"), "--out", str(tmp_path / "report"),
-                             "--params", str(params)], check=True, cwd=ROOT)
+        subprocess.run(run + ["stages.homography_estimate", "--truth", "truth.json", "--matches", "matches",
+                              "--method", method, "--out", f"est/{method}"], check=True, cwd=tmp_path, env=env)
+    subprocess.run(run + ["stages.homography_report", "--truth", "truth.json", "--images", "images",
+                          "--estimates", "est/ours", "est/opencv_magsac", "--metrics", "metrics.json",
+                          "--out", "report", "--summary", "summary.json"], check=True, cwd=tmp_path, env=env)
     metrics = io.load_json(tmp_path / "metrics.json")
     assert set(metrics) == {"ours", "opencv_magsac"}
     # same 1 px tolerance as the CLI test: an easy synthetic warp
     assert metrics["ours"]["median_corner_error_px"] < 1.0 and metrics["ours"]["pairs_within"] == 1
     pic = io.read_image(tmp_path / "report" / "p.png")
     assert pic.shape[1] == 3 * 400  # truth + two methods
+    from cvpipe.report import validate_summary
+
+    summary = validate_summary(io.load_json(tmp_path / "summary.json"))
+    assert summary["task"] == "homography" and set(summary["timings"]) == {"ours", "opencv_magsac"}
