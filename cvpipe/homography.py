@@ -9,14 +9,17 @@ boolean inlier mask. The pipeline is
 2. RANSAC over minimal 4-point samples drawn without replacement, solved in closed form (the two projective bases),
    with degenerate samples rejected before solving (three collinear points in either view, or triangle orientations
    that disagree between the views, which no homography with every point in front of both cameras produces);
-3. MSAC scoring (truncated squared error) with an exact bail-out once a hypothesis cannot beat the best so far, and
-   the adaptive iteration bound ``log(1 - confidence) / log(1 - w^4)`` from the best inlier ratio ``w`` so far;
+3. MSAC scoring (truncated squared error) with Wald's sequential probability ratio test (Chum & Matas 2008: a bad
+   hypothesis is dropped after a few dozen points; its parameters are re-estimated as the run goes), an exact
+   bail-out once a hypothesis cannot beat the best so far, and the adaptive iteration bound
+   ``log(1 - confidence) / log(1 - w^4 (1 - 1/A))`` from the best inlier ratio ``w`` so far (``1/A`` bounds the
+   chance that the SPRT rejects a good model); the points are verified in a random order;
 4. LO-RANSAC: every so-far-best model is re-estimated by least squares on its inliers, then iteratively with the
    inlier threshold shrinking from ``lo_multiplier * threshold`` to ``threshold``;
 5. a final iteratively reweighted Levenberg-Marquardt refinement of the reprojection error (Tukey weights).
 
-The per-hypothesis loop, scoring and refinement are numba kernels (``cache=True``; the first call in a fresh cache
-compiles them, which takes a few seconds once). Random numbers come from a ``numpy.random.Generator`` in chunks, so
+The per-hypothesis loop, scoring and refinement are numba kernels (``cache=True``; the first call with a fresh
+``NUMBA_CACHE_DIR`` compiles them, about 30 s of CPU once; later processes load them in about a second). Random numbers come from a ``numpy.random.Generator`` in chunks, so
 a seeded ``rng`` reproduces a result exactly.
 """
 
@@ -1065,7 +1068,7 @@ def find_homography(
     local_optimization : bool
         Re-estimate every so-far-best model from its inliers (LO-RANSAC).
     refine : bool
-        Finish with Levenberg-Marquardt on the inliers' reprojection error.
+        Finish with iteratively reweighted Levenberg-Marquardt (Tukey weights) on the reprojection error.
     lo_multiplier, lo_steps : float, int
         The LO threshold shrinks from ``lo_multiplier * threshold`` to ``threshold`` in ``lo_steps`` refits.
 
