@@ -1355,9 +1355,9 @@ def _opencv(method_flag_name: str) -> Callable[..., HomographyFit]:
         s, d = _check_pair(src, dst)
         if not (math.isfinite(threshold) and threshold > 0):
             raise InputError(f"`threshold` must be a finite number > 0 pixels, got {threshold!r}")
-        if rng is not None:
-            # OpenCV draws from its own global RNG; seed it from ours so a seeded run is reproducible
-            cv2.setRNGSeed(int(np.random.default_rng(rng).integers(0, 2**31 - 1)))
+        # ``rng`` is accepted for the common signature and ignored: cv2.findHomography's RANSAC and USAC samplers
+        # start from a fixed internal state (the result does not change with cv2.setRNGSeed), so they are
+        # deterministic for given points
         H, mask = cv2.findHomography(s, d, getattr(cv2, method_flag_name), float(threshold),
                                      maxIters=int(max_iters), confidence=float(confidence))
         if H is None or mask is None:
@@ -1370,7 +1370,8 @@ def _opencv(method_flag_name: str) -> Callable[..., HomographyFit]:
         return HomographyFit(H=H, inliers=inl, iterations=-1, rms=rms)
 
     estimate.__name__ = f"opencv_{method_flag_name.lower()}"
-    estimate.__doc__ = f"``cv2.findHomography`` with ``cv2.{method_flag_name}`` behind the find_homography interface."
+    estimate.__doc__ = (f"``cv2.findHomography`` with ``cv2.{method_flag_name}`` behind the find_homography interface "
+                        "(deterministic: ``rng`` is ignored).")
     return estimate
 
 
