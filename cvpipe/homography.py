@@ -237,8 +237,12 @@ def dlt(src, dst, weights=None) -> np.ndarray:
     A[0::2] = np.stack([x, y, one, zero, zero, zero, -u * x, -u * y, -u], axis=1)
     A[1::2] = np.stack([zero, zero, zero, x, y, one, -v * x, -v * y, -v], axis=1)
     A *= np.repeat(np.sqrt(w), 2)[:, None]
+    if len(A) < 9:
+        # 4 points give 8 equations: pad to 9 rows so that the SVD returns the null vector as its 9th row
+        A = np.vstack([A, np.zeros((9 - len(A), 9))])
     _, sv, vt = np.linalg.svd(A, full_matrices=False)
-    if sv[-2] <= 1e-12 * sv[0]:
+    # rank 8 is needed for a unique solution: the 8th singular value must not vanish
+    if sv[7] <= 1e-12 * sv[0]:
         raise EstimationError("the DLT system is rank-deficient (degenerate configuration); supply more spread points")
     Hn = vt[-1].reshape(3, 3)
     H = np.linalg.solve(Td, Hn @ Ts)

@@ -165,3 +165,29 @@ def test_estimate_and_report_stages(tmp_path, pair_files):
 
     summary = validate_summary(io.load_json(tmp_path / "summary.json"))
     assert summary["task"] == "homography" and set(summary["timings"]) == {"ours", "opencv_magsac"}
+
+
+def test_cli_and_bench_argument_checks(pair_files, capsys):
+    a, b, _ = pair_files
+    assert cli.main(["homography", str(a), str(b), "--max-features", "0"]) == 2
+    assert "`--max-features` must be >= 1" in capsys.readouterr().err
+    assert cli.main(["homography", str(a), str(b), "--ratio", "1.5"]) == 2
+    assert "`--ratio` must be in (0, 1]" in capsys.readouterr().err
+    assert cli.main(["bench", "homography", "--no-real", "--repeats", "0"]) == 2
+    assert "`--repeats` must be >= 1" in capsys.readouterr().err
+    assert cli.main(["bench", "homography", "--no-real", "--synthetic-trials", "0"]) == 2
+    assert "`--synthetic-trials` must be >= 1" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("cls, mapping, message", [
+    ("HomographyEstimateParams", {"threshold": 0.0}, r"`threshold` must be in \(0\.0, inf\]"),
+    ("HomographyEstimateParams", {"confidence": 1.0}, r"`confidence` must be in \(0, 1\), got 1\.0"),
+    ("HomographyEstimateParams", {"max_iters": 0}, r"`max_iters` must be in \[1, 10000000\]"),
+    ("HomographyReportParams", {"success_px": -1.0}, r"`success_px` must be in \(0\.0, inf\]"),
+    ("HomographyReportParams", {"checker_tiles": 0}, r"`checker_tiles` must be in \[1, 256\]"),
+])
+def test_homography_params_ranges(cls, mapping, message):
+    from cvpipe import params
+
+    with pytest.raises(InputError, match=message):
+        params.from_mapping(getattr(params, cls), mapping, "homography.x")
