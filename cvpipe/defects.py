@@ -20,7 +20,8 @@ from .errors import EstimationError, InputError
 from .features import Features, detect
 from .homography import find_homography
 from .matching import match
-from .params import DefectDiffParams, DefectRegionParams, DefectRegisterParams, FeaturesParams, MatchParams
+from .params import (DefectDiffParams, DefectFeaturesParams, DefectRegionParams, DefectRegisterParams, FeaturesParams,
+                     MatchParams)
 
 VERDICTS = ("perfect", "faulty")
 
@@ -29,7 +30,7 @@ VERDICTS = ("perfect", "faulty")
 class InspectParams:
     """Every parameter of :func:`inspect`, one frozen dataclass per pipeline stage."""
 
-    features: FeaturesParams = field(default_factory=FeaturesParams)
+    features: FeaturesParams = field(default_factory=DefectFeaturesParams)
     match: MatchParams = field(default_factory=MatchParams)
     register: DefectRegisterParams = field(default_factory=DefectRegisterParams)
     diff: DefectDiffParams = field(default_factory=DefectDiffParams)
@@ -210,7 +211,7 @@ def register(reference: np.ndarray, probe: np.ndarray, params: DefectRegisterPar
         correlation stays below ``min_correlation``. The message says which and what to tune.
     """
     p = params or DefectRegisterParams()
-    fp, mp = features or FeaturesParams(), matching or MatchParams()
+    fp, mp = features or DefectFeaturesParams(), matching or MatchParams()
     reference, probe = _check_gray("reference", reference), _check_gray("probe", probe)
     (rh, rw), (ph, pw) = reference.shape, probe.shape
     side_ratio = max(rh / ph, ph / rh, rw / pw, pw / rw)
@@ -336,24 +337,30 @@ def _disc(radius: int) -> np.ndarray:
 
 
 def fit_gain_bias(reference: np.ndarray, warped: np.ndarray, valid: np.ndarray, trim: float = 3.0,
-                  iterations: int = 4, max_samples: int = 60_000) -> tuple[float, float, float]:
+                  iterations: int = 4, max_samples: int = 40_000) -> tuple[float, float, float]:
     """Robust fit of ``warped ~= gain * reference + bias`` over ``valid`` pixels.
 
     Least squares repeated on the pixels whose residual lies within ``trim`` robust standard deviations (MAD), so
-    defects and misregistered edges do not pull the fit.
+    defects and misregistered edges do not pull the fit. At most about ``max_samples`` pixels on a regular grid
+    are used.
+
+    Parameters
+    ----------
+    reference, warped : (H, W) array
+        Grey levels.
+    valid : (H, W) bool
 
     Returns
     -------
     gain, bias, sigma : float
-        ``sigma`` is the robust residual standard deviation in grey levels.
+        ``sigma`` is the robust residual standard deviation in grey levels (plus 0.5 for quantisation).
     """
-    r = reference[valid].astype(np.float64)
-    w = warped[valid].astype(np.float64)
+    step = max(1, int(np.sqrt(valid.size / max_samples)))
+    v = valid[::step, ::step]
+    r = reference[::step, ::step][v].astype(np.float64)
+    w = warped[::step, ::step][v].astype(np.float64)
     if len(r) < 100:
-        raise EstimationError(f"registration failed: only {len(r)} overlapping pixels to compare")
-    if len(r) > max_samples:  # a regular subsample: deterministic and as good as a random one here
-        step = len(r) // max_samples + 1
-        r, w = r[::step], w[::step]
+        raise EstimationError(f"registration failed: only {int(valid.sum())} overlapping pixels to compare")
     keep = np.ones(len(r), bool)
     gain, bias, sigma = 1.0, 0.0, 0.0
     for _ in range(iterations):

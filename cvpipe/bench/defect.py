@@ -46,6 +46,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=20261122, help="seed of the random warps")
     parser.add_argument("--pad", type=float, default=DEEPPCB_PAD,
                         help=f"box padding in px for DeepPCB's loose boxes (default {DEEPPCB_PAD:g})")
+    parser.add_argument("--detector", help="keypoint detector for registration (default: defect.features)")
+    parser.add_argument("--max-features", type=int, help="keypoints per image (default: defect.features)")
     parser.add_argument("--no-baseline", action="store_true", help="skip the seed's method")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
     parser.add_argument("--out", help="write results JSON here as well")
@@ -159,16 +161,16 @@ def _score(counts: dict, verdicts: list[tuple[str, str]]) -> dict:
     }
 
 
-def evaluate(pairs: list[dict], seed: int, pad: float, baseline: bool = True, progress: bool | None = None) -> dict:
+def evaluate(pairs: list[dict], seed: int, params: defects.InspectParams, baseline: bool = True,
+             progress: bool | None = None) -> dict:
     """Run ours (and the seed's method) on both probes of every pair; return metrics and timings."""
-    params = defects.InspectParams()
-    params = replace(params, regions=replace(params.regions, pad=pad))
+    pad = params.regions.pad
     tight = replace(params.regions, pad=0.0)
     names = ["ours", "ours_tight_boxes"] + (["seed"] if baseline else [])
     counts = {k: DetectionCounts(0, 0, 0) for k in names}
     verdicts = {k: [] for k in names}
     times = {"ours": [], "seed": [], "reference_features": []}
-    failures = []
+    failures, n_direct = [], 0
     for k, pair in enumerate(tqdm(pairs, desc="defect", disable=progress)):
         rng = np.random.default_rng([seed, k])
         ref = io.read_image(pair["template"], "gray")
@@ -182,6 +184,7 @@ def evaluate(pairs: list[dict], seed: int, pad: float, baseline: bool = True, pr
             try:
                 r = defects.inspect(ref, probe, params, reference_features=fr)
                 times["ours"].append(time.perf_counter() - t0)
+                n_direct += r.registration.method == "direct"
                 verdicts["ours"].append((truth_verdict, r.verdict))
                 counts["ours"] += match_boxes(r.probe_regions, gt, IOU)[0]
                 tight_boxes = defects.find_regions(r.difference, r.registration.H, probe.shape, tight).probe_regions
@@ -209,6 +212,8 @@ def evaluate(pairs: list[dict], seed: int, pad: float, baseline: bool = True, pr
         key = "seed" if name == "seed" else "ours"
         results[name]["median_s_per_probe"] = statistics.median(times[key]) if times[key] else None
     return {"pairs": len(pairs), "probes": 2 * len(pairs), "iou": IOU, "pad": pad, "seed": seed,
+            "detector": params.features.detector, "max_features": params.features.max_features,
+            "direct_registrations": n_direct,
             "methods": results, "reference_features_median_s": statistics.median(times["reference_features"]),
             "failures": failures}
 
@@ -227,7 +232,11 @@ def run(args: argparse.Namespace) -> int:
     # warm-up: the first call pays for lazy initialisation (FLANN, OpenCV's thread pool)
     warm = io.read_image(pairs[0]["template"], "gray")
     defects.inspect(warm, warm)
-    res = evaluate(pairs, args.seed, args.pad, not args.no_baseline)
+    params = defects.InspectParams()
+    feats = replace(params.features, **{k: v for k, v in (("detector", args.detector),
+                                                           ("max_features", args.max_features)) if v is not None})
+    params = replace(params, features=feats, regions=replace(params.regions, pad=args.pad))
+    res = evaluate(pairs, args.seed, params, not args.no_baseline)
     if args.out:
         io.save_json(args.out, res)
     if args.json:
@@ -240,6 +249,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"{name:18} {m['accuracy']:6.3f} {m['faulty_flagged']:8.3f} {m['false_alarm_rate']:8.3f} "
               f"{m['errors']:4d} {m['precision']:6.3f} {m['recall']:6.3f} {m['f1']:6.3f} "
               f"{m['median_s_per_probe']:8.3f}")
+    print(f"registration: {res['detector']} x {res['max_features']}, {res['direct_registrations']} probes aligned "
+          f"directly (too few keypoint matches)")
     print(f"reference features (once per reference): {res['reference_features_median_s']:.3f} s median")
     for f in res["failures"]:
         print(f"  registration failed: {f['pair']} {f['probe']}: {f['error']}")
