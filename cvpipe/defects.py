@@ -12,6 +12,7 @@ Every homography here maps reference pixels to probe pixels (x = column, y = row
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -35,6 +36,17 @@ class InspectParams:
     register: DefectRegisterParams = field(default_factory=DefectRegisterParams)
     diff: DefectDiffParams = field(default_factory=DefectDiffParams)
     regions: DefectRegionParams = field(default_factory=DefectRegionParams)
+
+
+def load_inspect_params(path="params.yaml") -> InspectParams:
+    """The ``defect.*`` sections of ``params.yaml`` as one :class:`InspectParams`."""
+    from .params import load_section
+
+    return InspectParams(load_section(DefectFeaturesParams, "defect.features", path),
+                         load_section(MatchParams, "defect.match", path),
+                         load_section(DefectRegisterParams, "defect.register", path),
+                         load_section(DefectDiffParams, "defect.diff", path),
+                         load_section(DefectRegionParams, "defect.regions", path))
 
 
 @dataclass(frozen=True)
@@ -173,9 +185,8 @@ def _ecc_refine(reference: np.ndarray, probe: np.ndarray, H: np.ndarray, p: Defe
         try:
             rho, warp = cv2.findTransformECC(ref_l, prb_l, warp, cv2.MOTION_HOMOGRAPHY, criteria, None, 3)
         except cv2.error as exc:
-            raise EstimationError(
-                f"registration failed: ECC refinement did not converge at scale {s:g} ({str(exc).strip()[:80]}); "
-                f"the probe may not show the reference part, or lower `ecc_levels`") from exc
+            raise EstimationError(f"registration failed: ECC refinement did not converge at scale {s:g}; the probe "
+                                  f"may not show the reference part, or lower `ecc_levels`") from exc
         H = _scaled(warp.astype(np.float64), 1.0 / s)
     return H, float(rho)
 
@@ -229,27 +240,30 @@ def register(reference: np.ndarray, probe: np.ndarray, params: DefectRegisterPar
         if not p.direct_fallback:
             raise
         H0 = _translation_init(reference, probe)
-        method, why = "direct", f"{exc}; direct alignment from a phase-correlation shift: "
+        method, why = "direct", f"{exc}; then direct alignment (ECC from a phase-correlation shift): "
     extra = 1 if method == "direct" else 0  # the direct start is rougher: one more, coarser ECC level
     H, rho = H0, float("nan")
-    if p.ecc_levels + extra > 0:
+    if p.ecc_levels + extra > 0:  # always true on the direct path
         try:
             H, rho = _ecc_refine(reference, probe, H0, p, p.ecc_levels + extra)
         except EstimationError as exc:
-            raise EstimationError(why + str(exc) if why else str(exc)) from exc
+            raise EstimationError(why + _reason(exc) if why else str(exc)) from exc
         if not np.all(np.isfinite(H)):
-            raise EstimationError(why + "registration failed: ECC refinement diverged; lower `ecc_levels`")
+            raise EstimationError((why or "registration failed: ") + "ECC refinement diverged; lower `ecc_levels`")
     try:
         _check_geometry(H, reference.shape, probe.shape, p)
     except EstimationError as exc:
-        raise EstimationError(why + str(exc)) from exc
+        raise EstimationError(why + _reason(exc) if why else str(exc)) from exc
     threshold = p.min_correlation if method == "features" else max(p.min_correlation, p.direct_min_correlation)
     if np.isfinite(rho) and rho < threshold:
-        raise EstimationError(f"{why}registration failed: aligned images correlate at only {rho:.2f} "
+        raise EstimationError(f"{why or 'registration failed: '}aligned images correlate at only {rho:.2f} "
                               f"(< {threshold:g}); is the probe the reference part?")
-    if method == "direct" and not np.isfinite(rho):
-        raise EstimationError(why + "registration failed: set `ecc_levels` > 0 to allow direct alignment")
     return Registration(H, H0, n_matches, n_in, rho, method)
+
+
+def _reason(exc: Exception) -> str:
+    """The message of a registration error without its leading "registration failed: "."""
+    return str(exc).removeprefix("registration failed: ")
 
 
 def _feature_homography(reference, probe, p, fp, mp, fr, fq, matches) -> tuple[np.ndarray, int, int]:
@@ -445,6 +459,40 @@ def map_boxes(boxes: np.ndarray, H: np.ndarray) -> np.ndarray:
     return np.concatenate([xy.min(1), xy.max(1)], 1)
 
 
+def merge_boxes(boxes: np.ndarray, scores: np.ndarray, distance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Merge boxes closer than ``distance`` pixels (gap along both axes) into their union, summing the scores.
+
+    Parameters
+    ----------
+    boxes : (K, 4) float
+        ``[x1, y1, x2, y2]``.
+    scores : (K,) float
+    distance : float
+        Largest gap, in pixels, between two boxes that are merged; 0 merges only overlapping or touching boxes,
+        a negative value merges nothing.
+    """
+    boxes, scores = np.array(boxes, np.float64).reshape(-1, 4), np.array(scores, np.float64).reshape(-1)
+    if distance < 0:
+        return boxes, scores
+    merged = True
+    while merged and len(boxes) > 1:
+        merged = False
+        for i in range(len(boxes)):
+            gap_x = np.maximum(boxes[:, 0], boxes[i, 0]) - np.minimum(boxes[:, 2], boxes[i, 2])
+            gap_y = np.maximum(boxes[:, 1], boxes[i, 1]) - np.minimum(boxes[:, 3], boxes[i, 3])
+            near = (gap_x <= distance) & (gap_y <= distance)
+            near[i] = False
+            if near.any():
+                group = near.copy()
+                group[i] = True
+                union = np.r_[boxes[group, :2].min(0), boxes[group, 2:].max(0)]
+                boxes = np.vstack([boxes[~group], union])
+                scores = np.r_[scores[~group], scores[group].sum()]
+                merged = True
+                break
+    return boxes, scores
+
+
 def find_regions(diff: Difference, H: np.ndarray, probe_shape: tuple[int, int],
                  params: DefectRegionParams | None = None) -> Inspection:
     """Threshold the difference, clean it, and turn connected components into defect regions and a verdict.
@@ -489,9 +537,10 @@ def find_regions(diff: Difference, H: np.ndarray, probe_shape: tuple[int, int],
                 continue
             boxes.append([x, y, x + w, y + h])
             scores.append(mass[i] / t_low)
-    order = np.argsort(scores)[::-1]
-    boxes_a = np.array(boxes, np.float64).reshape(-1, 4)[order]
-    scores_a = np.array(scores, np.float64)[order]
+    boxes_a, scores_a = merge_boxes(np.array(boxes, np.float64).reshape(-1, 4), np.array(scores, np.float64),
+                                    p.merge_distance)
+    order = np.argsort(scores_a, kind="stable")[::-1]
+    boxes_a, scores_a = boxes_a[order], scores_a[order]
     probe_boxes = map_boxes(boxes_a, H)
     if len(probe_boxes):
         ph, pw = probe_shape[:2]
@@ -538,3 +587,88 @@ def inspect(reference: np.ndarray, probe: np.ndarray, params: InspectParams | No
     result = find_regions(diff, reg.H, prb.shape, p.regions)
     return Inspection(result.verdict, result.score, result.regions, result.probe_regions, result.region_scores,
                       result.threshold, reg, diff)
+
+
+# --------------------------------------------------------------------------------------------------- pictures
+
+
+def draw_regions(image: np.ndarray, regions: np.ndarray, truth: np.ndarray | None = None,
+                 thickness: int = 2) -> np.ndarray:
+    """A BGR copy of ``image`` with ``regions`` outlined in red and optional ``truth`` boxes in green.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) uint8
+    regions, truth : (K, 4)
+        Boxes ``[x1, y1, x2, y2]`` in the image's pixels.
+    """
+    img = np.asarray(image)
+    out = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR) if img.ndim == 2 else img[..., :3].copy()
+    for boxes, color in ((truth, (0, 200, 0)), (regions, (0, 0, 255))):
+        if boxes is None:
+            continue
+        for x1, y1, x2, y2 in np.asarray(boxes, np.float64).reshape(-1, 4):
+            cv2.rectangle(out, (int(round(x1)), int(round(y1))), (int(round(x2)), int(round(y2))), color,
+                          thickness)
+    return out
+
+
+def heat_map(diff: np.ndarray, threshold: float) -> np.ndarray:
+    """BGR heat map of a difference image; the colour scale saturates at twice ``threshold``.
+
+    Parameters
+    ----------
+    diff : (H, W) float
+        Difference in grey levels (:attr:`Difference.diff`).
+    threshold : float
+        The extent threshold (:attr:`Inspection.threshold`), which lands in the middle of the scale.
+    """
+    scale = 255.0 / max(2.0 * float(threshold), 1e-6)
+    return cv2.applyColorMap(np.clip(np.asarray(diff, np.float32) * scale, 0, 255).astype(np.uint8),
+                             cv2.COLORMAP_INFERNO)
+
+
+# --------------------------------------------------------------------------------------------------- evaluation
+
+
+def evaluate(results: list[dict], truth: list[dict], iou: float = 0.33) -> dict:
+    """Image- and defect-level scores of inspection records against ground truth.
+
+    Parameters
+    ----------
+    results : list of dict
+        Records as ``cvpipe inspect --json`` prints them (``probe``, ``verdict`` or None with ``error``,
+        ``regions`` in probe pixels), matched to ``truth`` by the file name of ``probe``.
+    truth : list of dict
+        ``{"file", "verdict", "boxes"}`` per probe (the samples' truth.json layout).
+    iou : float
+        A region matches a true box at IoU >= ``iou`` (one-to-one, greedy).
+
+    Returns
+    -------
+    dict
+        ``accuracy`` (errors count as wrong), ``faulty_flagged``, ``false_alarm_rate`` (perfect probes judged
+        faulty or not registered), ``errors``, defect-level ``precision``, ``recall``, ``f1`` and the counts.
+    """
+    from .metrics import DetectionCounts, match_boxes
+
+    by_name = {Path(r["probe"]).name: r for r in results}
+    counts, right, flagged, alarms, errors = DetectionCounts(0, 0, 0), 0, [], [], 0
+    for t in truth:
+        r = by_name.get(t["file"])
+        if r is None:
+            raise InputError(f"no inspection result for probe {t['file']}")
+        verdict = r.get("verdict")
+        errors += verdict is None
+        right += verdict == t["verdict"]
+        (flagged if t["verdict"] == "faulty" else alarms).append(
+            verdict == "faulty" if t["verdict"] == "faulty" else verdict != "perfect")
+        regions = r.get("regions")
+        counts += match_boxes(np.asarray([] if regions is None else regions, float).reshape(-1, 4),
+                              np.asarray(t["boxes"], float).reshape(-1, 4), iou)[0]
+    n = len(truth)
+    return {"probes": n, "accuracy": right / n if n else None, "errors": errors,
+            "faulty_flagged": float(np.mean(flagged)) if flagged else None,
+            "false_alarm_rate": float(np.mean(alarms)) if alarms else None,
+            "precision": counts.precision, "recall": counts.recall, "f1": counts.f1,
+            "tp": counts.tp, "fp": counts.fp, "fn": counts.fn, "iou": iou}

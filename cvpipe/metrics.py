@@ -107,3 +107,24 @@ def match_boxes(pred, truth, iou_threshold: float = 0.5) -> tuple[DetectionCount
                 pairs.append((i, j))
     k = len(pairs)
     return DetectionCounts(k, n - k, m - k), np.array(pairs, np.int64).reshape(-1, 2)
+
+
+def corner_error(H_est, H_true, width: int, height: int) -> float:
+    """Mean distance in pixels between the image corners mapped by ``H_est`` and by ``H_true``.
+
+    Parameters
+    ----------
+    H_est, H_true : (3, 3) array_like
+        Homographies of the same direction.
+    width, height : int
+        Size of the image whose corners ``(0, 0), (w-1, 0), (w-1, h-1), (0, h-1)`` are mapped.
+    """
+    corners = np.array([[0, 0, 1], [width - 1, 0, 1], [width - 1, height - 1, 1], [0, height - 1, 1]], float)
+    out = []
+    for H in (H_est, H_true):
+        H = np.asarray(H, np.float64)
+        if H.shape != (3, 3) or not np.all(np.isfinite(H)):
+            raise ValueError(f"homographies must be finite 3x3 matrices, got shape {H.shape}")
+        p = corners @ H.T
+        out.append(p[:, :2] / p[:, 2:])
+    return float(np.linalg.norm(out[0] - out[1], axis=1).mean())

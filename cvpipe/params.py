@@ -255,6 +255,7 @@ class DefectRegionParams:
     open_radius: int = 1
     close_radius: int = 5
     min_area: int = 12
+    merge_distance: float = 8.0
     pad: float = 0.0
 
     def __post_init__(self):
@@ -265,6 +266,7 @@ class DefectRegionParams:
         _in_range("open_radius", self.open_radius, 0, 50)
         _in_range("close_radius", self.close_radius, 0, 50)
         _in_range("min_area", self.min_area, 1, 1_000_000)
+        _in_range("merge_distance", self.merge_distance, -1.0, 1000.0)
         _in_range("pad", self.pad, 0.0, 1000.0)
 
 
