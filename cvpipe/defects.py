@@ -174,7 +174,11 @@ def _local_scale(H: np.ndarray, x: float, y: float) -> float:
 
 def _ecc_refine(reference: np.ndarray, probe: np.ndarray, H: np.ndarray, p: DefectRegisterParams,
                 levels: int) -> tuple[np.ndarray, float]:
-    """ECC (``MOTION_HOMOGRAPHY``) coarse to fine over ``levels`` octaves ending at ``ecc_scale``."""
+    """ECC (``MOTION_HOMOGRAPHY``) coarse to fine over ``levels`` octaves ending at ``ecc_scale``.
+
+    A coarse level that does not converge (too little structure left at that scale) is skipped; only a failure at
+    the finest level is an error.
+    """
     criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, p.ecc_iterations, p.ecc_eps)
     rho = float("nan")
     for level in range(levels - 1, -1, -1):
@@ -185,6 +189,8 @@ def _ecc_refine(reference: np.ndarray, probe: np.ndarray, H: np.ndarray, p: Defe
         try:
             rho, warp = cv2.findTransformECC(ref_l, prb_l, warp, cv2.MOTION_HOMOGRAPHY, criteria, None, 3)
         except cv2.error as exc:
+            if level > 0:
+                continue
             raise EstimationError(f"registration failed: ECC refinement did not converge at scale {s:g}; the probe "
                                   f"may not show the reference part, or lower `ecc_levels`") from exc
         H = _scaled(warp.astype(np.float64), 1.0 / s)

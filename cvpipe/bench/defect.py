@@ -129,7 +129,8 @@ def seed_method(reference: np.ndarray, probe: np.ndarray, ref_feats, threshold: 
                 min_area: int = 12) -> np.ndarray:
     """The seed's inspection: SIFT + cv2.findHomography, warp, ``cv2.absdiff``, fixed threshold, components.
 
-    Returns the regions (K, 4) in probe pixels; raises ``CvpipeError`` when registration fails.
+    ``ref_feats`` are the reference's SIFT features. Returns the regions (K, 4) in probe pixels; raises
+    ``CvpipeError`` when registration fails.
     """
     fq = detect(probe, "sift", 4000)
     m = match(ref_feats.descriptors, fq.descriptors, 0.75)
@@ -170,7 +171,7 @@ def evaluate(pairs: list[dict], seed: int, params: defects.InspectParams, baseli
     counts = {k: DetectionCounts(0, 0, 0) for k in names}
     verdicts = {k: [] for k in names}
     times = {"ours": [], "seed": [], "reference_features": []}
-    failures, n_direct = [], 0
+    failures, n_direct, records = [], 0, []
     for k, pair in enumerate(tqdm(pairs, desc="defect", disable=progress)):
         rng = np.random.default_rng([seed, k])
         ref = io.read_image(pair["template"], "gray")
@@ -178,6 +179,7 @@ def evaluate(pairs: list[dict], seed: int, params: defects.InspectParams, baseli
         t0 = time.perf_counter()
         fr = detect(ref, params.features.detector, params.features.max_features)
         times["reference_features"].append(time.perf_counter() - t0)
+        fr_seed = detect(ref, "sift", 4000) if baseline else None
         for truth_verdict, src, boxes in (("faulty", test, pair["boxes"]), ("perfect", ref, np.zeros((0, 4)))):
             probe, H, gt = make_probe(src, boxes, rng)
             t0 = time.perf_counter()
@@ -186,20 +188,25 @@ def evaluate(pairs: list[dict], seed: int, params: defects.InspectParams, baseli
                 times["ours"].append(time.perf_counter() - t0)
                 n_direct += r.registration.method == "direct"
                 verdicts["ours"].append((truth_verdict, r.verdict))
-                counts["ours"] += match_boxes(r.probe_regions, gt, IOU)[0]
+                c = match_boxes(r.probe_regions, gt, IOU)[0]
+                counts["ours"] += c
+                records.append({"pair": pair["name"], "probe": truth_verdict, "verdict": r.verdict, "tp": c.tp,
+                                "fp": c.fp, "fn": c.fn, "registration": r.registration.method})
                 tight_boxes = defects.find_regions(r.difference, r.registration.H, probe.shape, tight).probe_regions
                 verdicts["ours_tight_boxes"].append((truth_verdict, r.verdict))
                 counts["ours_tight_boxes"] += match_boxes(tight_boxes, gt, IOU)[0]
             except CvpipeError as exc:
                 times["ours"].append(time.perf_counter() - t0)
                 failures.append({"pair": pair["name"], "probe": truth_verdict, "error": str(exc)})
+                records.append({"pair": pair["name"], "probe": truth_verdict, "verdict": None, "tp": 0, "fp": 0,
+                                "fn": len(gt), "registration": None})
                 for name in ("ours", "ours_tight_boxes"):
                     verdicts[name].append((truth_verdict, "error"))
                     counts[name] += DetectionCounts(0, 0, len(gt))
             if baseline:
                 t0 = time.perf_counter()
                 try:
-                    boxes_seed = seed_method(ref, probe, fr)
+                    boxes_seed = seed_method(ref, probe, fr_seed)
                     times["seed"].append(time.perf_counter() - t0)
                     verdicts["seed"].append((truth_verdict, "faulty" if len(boxes_seed) else "perfect"))
                     counts["seed"] += match_boxes(boxes_seed, gt, IOU)[0]
@@ -215,7 +222,7 @@ def evaluate(pairs: list[dict], seed: int, params: defects.InspectParams, baseli
             "detector": params.features.detector, "max_features": params.features.max_features,
             "direct_registrations": n_direct,
             "methods": results, "reference_features_median_s": statistics.median(times["reference_features"]),
-            "failures": failures}
+            "failures": failures, "records": records}
 
 
 def run(args: argparse.Namespace) -> int:
