@@ -185,14 +185,27 @@ def _ecc_refine(reference: np.ndarray, probe: np.ndarray, H: np.ndarray, p: Defe
         s = p.ecc_scale * 0.5 ** level
         ref_l = cv2.resize(reference, None, fx=s, fy=s, interpolation=cv2.INTER_AREA) if s != 1 else reference
         prb_l = cv2.resize(probe, None, fx=s, fy=s, interpolation=cv2.INTER_AREA) if s != 1 else probe
-        warp = _scaled(H, s).astype(np.float32)
+        start = _scaled(H, s).astype(np.float32)
         try:
-            rho, warp = cv2.findTransformECC(ref_l, prb_l, warp, cv2.MOTION_HOMOGRAPHY, criteria, None, 3)
+            rho, warp = cv2.findTransformECC(ref_l, prb_l, start.copy(), cv2.MOTION_HOMOGRAPHY, criteria, None, 3)
         except cv2.error as exc:
             if level > 0:
                 continue
-            raise EstimationError(f"registration failed: ECC refinement did not converge at scale {s:g}; the probe "
-                                  f"may not show the reference part, or lower `ecc_levels`") from exc
+            warp = None
+            for motion in (cv2.MOTION_AFFINE, cv2.MOTION_EUCLIDEAN):  # too little structure for 8 parameters
+                affine = (start[:2] / start[2, 2]).astype(np.float32)
+                if motion == cv2.MOTION_EUCLIDEAN:
+                    u, _, vt = np.linalg.svd(affine[:, :2])
+                    affine[:, :2] = u @ vt
+                try:
+                    rho, affine = cv2.findTransformECC(ref_l, prb_l, affine, motion, criteria, None, 3)
+                except cv2.error:
+                    continue
+                warp = np.vstack([affine, [0, 0, 1]])
+                break
+            if warp is None:
+                raise EstimationError(f"registration failed: ECC refinement did not converge at scale {s:g}; the "
+                                      f"probe may not show the reference part, or lower `ecc_levels`") from exc
         H = _scaled(warp.astype(np.float64), 1.0 / s)
     return H, float(rho)
 
@@ -241,12 +254,27 @@ def register(reference: np.ndarray, probe: np.ndarray, params: DefectRegisterPar
     try:
         H0, n_matches, n_in = _feature_homography(reference, probe, p, fp, mp, reference_features, probe_features,
                                                   matches)
-        method, why = "features", ""
+        reg = _align(reference, probe, H0, "features", p, n_matches, n_in, "")
     except EstimationError as exc:
         if not p.direct_fallback:
             raise
-        H0 = _translation_init(reference, probe)
-        method, why = "direct", f"{exc}; then direct alignment (ECC from a phase-correlation shift): "
+        return _align(reference, probe, _translation_init(reference, probe), "direct", p, n_matches, n_in,
+                      f"{exc}; then direct alignment (ECC from a phase-correlation shift): ")
+    if p.direct_fallback and np.isfinite(reg.correlation) and reg.correlation < p.retry_correlation:
+        # keypoints on repetitive layouts can agree on a wrong homography that ECC cannot leave: try the direct
+        # start as well and keep whichever aligns better
+        try:
+            other = _align(reference, probe, _translation_init(reference, probe), "direct", p, n_matches, n_in, "")
+        except EstimationError:
+            return reg
+        if other.correlation > reg.correlation:
+            return other
+    return reg
+
+
+def _align(reference: np.ndarray, probe: np.ndarray, H0: np.ndarray, method: str, p: DefectRegisterParams,
+           n_matches: int, n_in: int, why: str) -> Registration:
+    """ECC refinement of ``H0`` and the checks on its result; ``why`` prefixes error messages."""
     extra = 1 if method == "direct" else 0  # the direct start is rougher: one more, coarser ECC level
     H, rho = H0, float("nan")
     if p.ecc_levels + extra > 0:  # always true on the direct path

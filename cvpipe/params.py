@@ -212,6 +212,7 @@ class DefectRegisterParams:
     min_correlation: float = 0.5
     direct_fallback: bool = True
     direct_min_correlation: float = 0.8
+    retry_correlation: float = 0.95
     seed: int = 0
 
     def __post_init__(self):
@@ -226,6 +227,7 @@ class DefectRegisterParams:
         _in_range("ecc_eps", self.ecc_eps, 0.0, 1.0, lo_open=True)
         _in_range("min_correlation", self.min_correlation, -1.0, 1.0)
         _in_range("direct_min_correlation", self.direct_min_correlation, -1.0, 1.0)
+        _in_range("retry_correlation", self.retry_correlation, -1.0, 1.0)
 
 
 @dataclass(frozen=True)
