@@ -31,10 +31,11 @@ def main() -> None:
     summary = {}
     for path in tqdm(io.list_images(images / "probes"), desc="register", disable=None):
         probe = io.read_image(path, "gray")
+        probe_feats = Features.from_arrays(io.load_npz(feats / "probes" / f"{path.stem}.npz"))
+        matches = io.load_npz(Path(args.matches) / f"{path.stem}.npz")["index"]
         try:
-            reg = defects.register(ref, probe, p, reference_features=ref_feats,
-                                   probe_features=Features.from_arrays(io.load_npz(feats / "probes" / f"{path.stem}.npz")),
-                                   matches=io.load_npz(Path(args.matches) / f"{path.stem}.npz")["index"])
+            reg = defects.register(ref, probe, p, reference_features=ref_feats, probe_features=probe_feats,
+                                   matches=matches)
         except CvpipeError as exc:
             summary[path.name] = {"error": str(exc)}
             continue
