@@ -179,6 +179,17 @@ def test_image_validation(reference):
         defects.map_boxes([[0, 0, 1, 1]], np.zeros((3, 3)))
 
 
+def test_gain_bias_fit_refuses_what_it_cannot_fit():
+    flat = np.full((50, 50), 100.0)
+    with pytest.raises(EstimationError, match="the reference is flat over the overlap"):
+        defects.fit_gain_bias(flat, flat, np.ones(flat.shape, bool))
+    ramp = np.tile(np.arange(50.0), (50, 1))
+    with pytest.raises(EstimationError, match="gain -1.00 against the reference"):
+        defects.fit_gain_bias(ramp, 255 - ramp, np.ones(ramp.shape, bool))
+    with pytest.raises(EstimationError, match="only 4 overlapping pixels"):
+        defects.fit_gain_bias(ramp, ramp, np.pad(np.ones((2, 2), bool), 24))
+
+
 # --------------------------------------------------------------------------------------------- regions and metrics
 
 
@@ -251,6 +262,27 @@ def test_inspect_command_rejects_bad_options(tmp_path, capsys, reference):
     io.save_image(tmp_path / "ref.png", reference)
     code = cli.main(["inspect", str(tmp_path / "ref.png"), str(tmp_path / "ref.png"), "--threshold", "2"])
     assert code == 2 and "`threshold` must be in (0.0, 1.0], got 2.0" in capsys.readouterr().err
+
+
+def test_inspect_command_all_failing_and_unreadable_reference(tmp_path, capsys, reference):
+    io.save_image(tmp_path / "ref.png", reference)
+    io.save_image(tmp_path / "blank.png", np.zeros((SIZE, SIZE), np.uint8))
+    assert cli.main(["inspect", str(tmp_path / "ref.png"), str(tmp_path / "blank.png")]) == 1
+    assert "no probe could be registered" in capsys.readouterr().err
+    assert cli.main(["inspect", str(tmp_path / "missing.png"), str(tmp_path / "blank.png")]) == 2
+    assert "missing.png" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--data", "{tmp}", "--limit", "-1"], r"`--limit` must be >= 0, got -1"),
+    (["--data", "{tmp}", "--pad", "-2"], r"`--pad` must be >= 0, got -2"),
+    (["--data", "{tmp}"], r"pairs.txt: not found; --data must be the folder that holds deeppcb/"),
+])
+def test_bench_defect_argument_errors(tmp_path, capsys, argv, message):
+    import re
+
+    assert cli.main(["bench", "defect", *[a.format(tmp=tmp_path) for a in argv]]) == 2
+    assert re.search(message, capsys.readouterr().err)
 
 
 # --------------------------------------------------------------------------------------------- real data
