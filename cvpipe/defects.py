@@ -314,7 +314,12 @@ def _feature_homography(reference, probe, p, fp, mp, fr, fq, matches) -> tuple[n
         raise EstimationError(f"registration failed: only {len(matches)} descriptor matches (need "
                               f"{p.min_inliers}); the probe does not seem to show the reference part")
     src, dst = fr.xy[matches[:, 0]].astype(np.float64), fq.xy[matches[:, 1]].astype(np.float64)
-    fit = find_homography(src, dst, threshold=p.ransac_threshold, rng=np.random.default_rng(p.seed))
+    try:
+        fit = find_homography(src, dst, threshold=p.ransac_threshold, rng=np.random.default_rng(p.seed))
+    except (ZeroDivisionError, FloatingPointError, np.linalg.LinAlgError) as exc:
+        # numerical failure inside the estimator on degenerate match sets: same meaning as its EstimationError
+        raise EstimationError(f"registration failed: the homography estimate from {len(matches)} matches broke "
+                              f"down numerically ({type(exc).__name__})") from exc
     n_in = int(np.count_nonzero(fit.inliers))
     if n_in < p.min_inliers or n_in < p.min_inlier_ratio * len(matches):
         raise EstimationError(
