@@ -620,6 +620,25 @@ def inspect(reference: np.ndarray, probe: np.ndarray, params: InspectParams | No
     ref, prb = _check_gray("reference", reference), _check_gray("probe", probe)
     reg = register(ref, prb, p.register, reference_features=reference_features, features=p.features,
                    matching=p.match)
+    return _second_opinion(ref, prb, reg, p)
+
+
+def register_for_inspection(reference: np.ndarray, probe: np.ndarray, params: InspectParams | None = None, *,
+                            reference_features: Features | None = None, probe_features: Features | None = None,
+                            matches: np.ndarray | None = None) -> Registration:
+    """The registration :func:`inspect` ends up using (for pipelines that store it between stages).
+
+    That is :func:`register`, except that a keypoint registration whose comparison finds defects is replaced by the
+    direct one (phase correlation + ECC) when that one leaves a smaller difference.
+    """
+    p = params or InspectParams()
+    ref, prb = _check_gray("reference", reference), _check_gray("probe", probe)
+    reg = register(ref, prb, p.register, reference_features=reference_features, probe_features=probe_features,
+                   matches=matches, features=p.features, matching=p.match)
+    return _second_opinion(ref, prb, reg, p).registration
+
+
+def _second_opinion(ref: np.ndarray, prb: np.ndarray, reg: Registration, p: InspectParams) -> Inspection:
     result = _compare(ref, prb, reg, p)
     if result.verdict == "faulty" and reg.method == "features" and p.register.direct_fallback:
         # On sparse boards the keypoints can lock ECC onto an alignment that is right where most of the copper is

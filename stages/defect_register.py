@@ -1,5 +1,8 @@
 """Stage `defect_register`: homography reference -> probe for every probe, and the probe warped onto the reference.
 
+The registration is the one `cvpipe inspect` uses (``defects.register_for_inspection``), which needs the diff and
+regions parameters too: a keypoint registration that would make the probe faulty is compared with the direct one.
+
 A probe that cannot be registered is recorded with its reason in registration.json (no .npz), and the later
 stages report it as an error instead of a verdict.
 """
@@ -13,7 +16,7 @@ from tqdm import tqdm
 from cvpipe import defects, io
 from cvpipe.errors import CvpipeError
 from cvpipe.features import Features
-from cvpipe.params import DefectRegisterParams, load_section
+
 
 
 def main() -> None:
@@ -24,7 +27,7 @@ def main() -> None:
     ap.add_argument("--out", required=True, help="folder for <probe>.npz and registration.json")
     ap.add_argument("--params", default="params.yaml")
     args = ap.parse_args()
-    p = load_section(DefectRegisterParams, "defect.register", args.params)
+    p = defects.load_inspect_params(args.params)
     images, feats, out = Path(args.images), Path(args.features), Path(args.out)
     ref = io.read_image(images / "reference.png", "gray")
     ref_feats = Features.from_arrays(io.load_npz(feats / "reference.npz"))
@@ -34,8 +37,8 @@ def main() -> None:
         probe_feats = Features.from_arrays(io.load_npz(feats / "probes" / f"{path.stem}.npz"))
         matches = io.load_npz(Path(args.matches) / f"{path.stem}.npz")["index"]
         try:
-            reg = defects.register(ref, probe, p, reference_features=ref_feats, probe_features=probe_feats,
-                                   matches=matches)
+            reg = defects.register_for_inspection(ref, probe, p, reference_features=ref_feats,
+                                                  probe_features=probe_feats, matches=matches)
         except CvpipeError as exc:
             summary[path.name] = {"error": str(exc)}
             continue

@@ -82,6 +82,15 @@ def test_inserted_defect_is_found_where_it_was_put(reference):
     assert r.score > 0
 
 
+def test_pipeline_registration_is_the_one_inspect_uses(reference):
+    part = reference.copy()
+    cv2.circle(part, (90, 90), 7, (230, 230, 230), -1, cv2.LINE_AA)
+    probe = make_probe(part, motion(-2.0, 1.02, (4.0, 7.0)), seed=9)
+    r = defects.inspect(reference, probe)
+    reg = defects.register_for_inspection(reference, probe)
+    assert reg.method == r.registration.method and np.array_equal(reg.H, r.registration.H)
+
+
 @pytest.mark.parametrize("seed, rot, shift, gain, bias", [
     (2, -3.5, (12.0, 8.0), 0.8, 20.0),
     (3, 1.0, (-14.0, 3.0), 1.15, -15.0),

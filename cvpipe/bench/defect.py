@@ -257,7 +257,7 @@ def run(args: argparse.Namespace) -> int:
               f"{m['errors']:4d} {m['precision']:6.3f} {m['recall']:6.3f} {m['f1']:6.3f} "
               f"{m['median_s_per_probe']:8.3f}")
     print(f"registration: {res['detector']} x {res['max_features']}, {res['direct_registrations']} probes aligned "
-          f"directly (keypoints gave no homography, or one that correlated worse)")
+          f"directly (keypoints gave no homography, or the direct start aligned better)")
     if "seed" in res["methods"]:
         ratio = res["methods"]["seed"]["median_s_per_probe"] / res["methods"]["ours"]["median_s_per_probe"]
         print(f"time per probe, seed / ours (same process, interleaved): {ratio:.2f}")
