@@ -195,6 +195,10 @@ class MatchGraph:
                    rejected)
 
 
+def _cross2(a: np.ndarray, b: np.ndarray) -> float:
+    return float(a[0] * b[1] - a[1] * b[0])
+
+
 def _plausible(H: np.ndarray, size_i: tuple[int, int]) -> str | None:
     """Why ``H`` (image i -> j) cannot be a camera rotation or a view of a plane, or None when it can."""
     w, h = size_i
@@ -203,12 +207,12 @@ def _plausible(H: np.ndarray, size_i: tuple[int, int]) -> str | None:
     if np.any(p[2] <= 1e-9 * np.abs(p).max()):
         return "homography sends a corner to infinity"
     q = (p[:2] / p[2]).T
-    cross = [np.cross(q[(k + 1) % 4] - q[k], q[(k + 2) % 4] - q[(k + 1) % 4]) for k in range(4)]
+    cross = [_cross2(q[(k + 1) % 4] - q[k], q[(k + 2) % 4] - q[(k + 1) % 4]) for k in range(4)]
     if not (all(c > 0 for c in cross) or all(c < 0 for c in cross)):
         return "homography folds the image (corners not convex)"
     if np.linalg.det(H[:2, :2]) <= 0:
         return "homography mirrors the image"
-    area = 0.5 * abs(sum(np.cross(q[k], q[(k + 1) % 4]) for k in range(4)))
+    area = 0.5 * abs(sum(_cross2(q[k], q[(k + 1) % 4]) for k in range(4)))
     ratio = area / float(w * h)
     if not 0.1 <= ratio <= 10:
         return f"homography changes the area by {ratio:.3g}x (outside 0.1..10)"
