@@ -10,7 +10,7 @@ The stages, in the order :func:`stitch` runs them (each is a pure function so th
 3. :func:`register` keeps the largest connected component (the other images are dropped with a reason), picks the
    reference image at the centre of the maximum spanning tree of the confidence graph, chains homographies along
    that tree, and refines all of them jointly by least squares over the inliers of every accepted pair
-   (``scipy.optimize.least_squares``). :func:`estimate_focal` gives the focal length that the cylindrical and
+   (Levenberg-Marquardt, :func:`levenberg_marquardt`). :func:`estimate_focal` gives the focal length that the cylindrical and
    spherical projections need.
 4. :mod:`cvpipe.warping` and :mod:`cvpipe.blending` compose the result.
 
@@ -30,8 +30,7 @@ from typing import Sequence
 
 import cv2
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.sparse import lil_matrix
+from scipy.sparse import coo_matrix
 from scipy.spatial.transform import Rotation
 
 from . import blending, warping
@@ -219,8 +218,35 @@ def _plausible(H: np.ndarray, size_i: tuple[int, int]) -> str | None:
     return None
 
 
+#: strongest features per image used to pick the candidate pairs
+PREFILTER_FEATURES = 250
+
+
+def candidate_pairs(feats: Sequence[Features], ratio: float, candidates: int) -> tuple[list, dict]:
+    """Pairs worth matching in full: every pair when ``candidates >= n - 1`` (or 0), else for every image the
+    ``candidates`` images that share the most ratio-test matches among the strongest ``PREFILTER_FEATURES``
+    features (Brown & Lowe consider the 6 best images per image). Returns the pairs ``(i, j), i < j`` and the
+    prefilter match count of the pairs left out."""
+    n = len(feats)
+    everything = [(i, j) for i in range(n) for j in range(i + 1, n)]
+    if candidates <= 0 or candidates >= n - 1:
+        return everything, {}
+    top = [f.descriptors[:PREFILTER_FEATURES] for f in feats]  # features are sorted by response
+    with ThreadPoolExecutor(_workers()) as pool:
+        counts = list(pool.map(lambda ij: len(match(top[ij[0]], top[ij[1]], ratio=ratio)), everything))
+    C = np.zeros((n, n), np.int64)
+    for (i, j), c in zip(everything, counts):
+        C[i, j] = C[j, i] = c
+    keep = set()
+    for i in range(n):
+        order = [j for j in np.argsort(-C[i], kind="stable") if j != i][:candidates]
+        keep.update((min(i, int(j)), max(i, int(j))) for j in order)
+    return sorted(keep), {ij: int(C[ij]) for ij in everything if ij not in keep}
+
+
 def match_graph(feats: Sequence[Features], sizes: Sequence[tuple[int, int]], *, ratio: float,
-                ransac_threshold: float, min_inliers: int, min_confidence: float, rng=None) -> MatchGraph:
+                ransac_threshold: float, min_inliers: int, min_confidence: float, candidates: int = 0,
+                rng=None) -> MatchGraph:
     """Match every pair of images and keep the pairs that share a plausible homography.
 
     Parameters
@@ -237,6 +263,8 @@ def match_graph(feats: Sequence[Features], sizes: Sequence[tuple[int, int]], *, 
         Fewest homography inliers for an edge.
     min_confidence : float
         Fewest ``inliers / (8 + 0.3 * matches)`` for an edge (1.0 in ``cv2.Stitcher``).
+    candidates : int
+        Match in full only each image's best candidates (:func:`candidate_pairs`); 0 matches every pair.
     rng : seed or Generator
         For RANSAC.
 
@@ -249,24 +277,24 @@ def match_graph(feats: Sequence[Features], sizes: Sequence[tuple[int, int]], *, 
     M = np.zeros((n, n), np.int64)
     I = np.zeros((n, n), np.int64)
     C = np.zeros((n, n), np.float64)
-    edges, rejected = {}, {}
-    todo = [(i, j) for i in range(n) for j in range(i + 1, n)]
-    with ThreadPoolExecutor(_workers()) as pool:  # OpenCV's matchers release the GIL
-        matched = list(pool.map(lambda ij: match(feats[ij[0]].descriptors, feats[ij[1]].descriptors, ratio=ratio),
-                                todo))
-    for (i, j), pairs in zip(todo, matched):
+    todo, skipped = candidate_pairs(feats, ratio, candidates)
+    rejected = {ij: f"not a candidate pair ({c} prefilter matches)" for ij, c in skipped.items()}
+    edges = {}
+
+    def verify(i: int, j: int, pairs: np.ndarray) -> None:
+        rejected.pop((i, j), None)
         M[i, j] = M[j, i] = len(pairs)
         if len(pairs) < max(4, min_inliers):
             if len(pairs):
                 rejected[(i, j)] = f"only {len(pairs)} matches"
-            continue
+            return
         src = feats[i].xy[pairs[:, 0]].astype(np.float64)
         dst = feats[j].xy[pairs[:, 1]].astype(np.float64)
         try:
             fit = find_homography(src, dst, threshold=ransac_threshold, rng=rng)
         except EstimationError as exc:
             rejected[(i, j)] = f"no homography ({exc})"
-            continue
+            return
         k = int(fit.inliers.sum())
         conf = k / (8.0 + 0.3 * len(pairs))
         I[i, j] = I[j, i] = k
@@ -278,8 +306,24 @@ def match_graph(feats: Sequence[Features], sizes: Sequence[tuple[int, int]], *, 
             why = f"confidence {conf:.2f} < min_confidence {min_confidence}"
         if why:
             rejected[(i, j)] = why
-            continue
-        edges[(i, j)] = Edge(i, j, fit.H / fit.H[2, 2], src[fit.inliers], dst[fit.inliers], conf)
+        else:
+            edges[(i, j)] = Edge(i, j, fit.H / fit.H[2, 2], src[fit.inliers], dst[fit.inliers], conf)
+
+    def full_match(ij):
+        return match(feats[ij[0]].descriptors, feats[ij[1]].descriptors, ratio=ratio)
+
+    with ThreadPoolExecutor(_workers()) as pool:  # OpenCV's matchers release the GIL
+        for (i, j), pairs in zip(todo, pool.map(full_match, todo)):
+            verify(i, j, pairs)
+    # the prefilter may miss the only link between two groups: try the skipped pairs that would join two
+    # components, most promising first, until the graph is connected or none is left
+    for ij in sorted(skipped, key=lambda ij: -skipped[ij]):
+        comps = _components(n, edges)
+        if len(comps) == 1:
+            break
+        where = {a: k for k, c in enumerate(comps) for a in c}
+        if where[ij[0]] != where[ij[1]]:
+            verify(*ij, full_match(ij))
     return MatchGraph([tuple(map(int, s)) for s in sizes], M, I, C, edges, rejected)
 
 
@@ -419,32 +463,137 @@ def _blocks(G: dict, edges: dict, max_points_per_pair: int, rng) -> list:
     return blocks
 
 
-def _solve(blocks: list, homs, x0: np.ndarray, columns) -> np.ndarray:
+def _solve(blocks: list, homs, x0: np.ndarray, columns, T: dict | None = None,
+           Tr_inv: np.ndarray | None = None) -> np.ndarray:
     """Least squares over the symmetric transfer error of all ``blocks``; ``homs(x)`` gives the homographies,
-    ``columns(a)`` the parameter columns image ``a`` depends on (for the sparse Jacobian)."""
-    n_res = sum(4 * len(b[2]) for b in blocks)
-    sparsity = lil_matrix((n_res, len(x0)), dtype=np.int8)
-    row = 0
-    for i, j, src, _ in blocks:
-        r = 4 * len(src)
-        for a in (i, j):
-            cols = columns(a)
-            if len(cols):
-                sparsity[row:row + r, cols] = 1
-        row += r
+    ``columns(a)`` the parameter columns image ``a`` depends on (for the sparse Jacobian).
+
+    With ``T`` and ``Tr_inv`` the parameters are the 8 free entries of ``Hn_a`` in ``H_a = Tr_inv Hn_a T_a`` and the
+    Jacobian is analytic; otherwise it is estimated by grouped finite differences."""
+    keys = sorted({a for blk in blocks for a in blk[:2]})
+    pos = {a: k for k, a in enumerate(keys)}
+    e_i = np.array([pos[blk[0]] for blk in blocks])
+    e_j = np.array([pos[blk[1]] for blk in blocks])
+    edge = np.concatenate([np.full(len(blk[2]), k) for k, blk in enumerate(blocks)])
+    src = np.concatenate([blk[2] for blk in blocks]).astype(np.float64)
+    dst = np.concatenate([blk[3] for blk in blocks]).astype(np.float64)
+    src_h = np.column_stack([src, np.ones(len(src))])
+    dst_h = np.column_stack([dst, np.ones(len(dst))])
+    n = len(src)
+    rows, cols = [], []
+    for k, blk in enumerate(blocks):  # residual rows of edge k: forward 2p, 2p+1 and backward 2n + 2p, 2n + 2p + 1
+        pts = np.nonzero(edge == k)[0]
+        r = np.concatenate([2 * pts, 2 * pts + 1, 2 * n + 2 * pts, 2 * n + 2 * pts + 1])
+        for a in blk[:2]:
+            c = columns(a)
+            if len(c):
+                rows.append(np.repeat(r, len(c)))
+                cols.append(np.tile(np.asarray(c), len(r)))
+    sparsity = coo_matrix((np.ones(sum(len(r) for r in rows), np.int8), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=(4 * n, len(x0))).tocsr()
+    sparsity.data[:] = 1
 
     def residuals(x):
         H = homs(x)
-        out = []
-        for i, j, src, dst in blocks:
-            out.append((warping.apply_h(np.linalg.solve(H[j], H[i]), src) - dst).ravel())
-            out.append((warping.apply_h(np.linalg.solve(H[i], H[j]), dst) - src).ravel())
-        return np.concatenate(out)
+        Hs = np.stack([H[a] for a in keys])
+        Hinv = np.linalg.inv(Hs)
+        fwd = np.einsum("nij,nj->ni", (Hinv[e_j] @ Hs[e_i])[edge], src_h)
+        bwd = np.einsum("nij,nj->ni", (Hinv[e_i] @ Hs[e_j])[edge], dst_h)
+        return np.concatenate([(fwd[:, :2] / fwd[:, 2:] - dst).ravel(), (bwd[:, :2] / bwd[:, 2:] - src).ravel()])
 
-    res = least_squares(residuals, x0, jac_sparsity=sparsity, x_scale="jac", method="trf", max_nfev=50)
-    if not np.all(np.isfinite(res.x)):
+    if T is None:
+        sp = sparsity.tocsc()
+
+        def jac(x):  # forward differences, one column at a time (used for the few rotation parameters)
+            r0 = residuals(x)
+            cols = []
+            for k in range(len(x)):
+                h = 1e-7 * max(1.0, abs(x[k]))
+                xk = x.copy()
+                xk[k] += h
+                rows = sp.indices[sp.indptr[k]:sp.indptr[k + 1]]
+                cols.append((rows, np.full(len(rows), k), (residuals(xk)[rows] - r0[rows]) / h))
+            r, c, v = (np.concatenate([t[m] for t in cols]) for m in range(3))
+            return coo_matrix((v, (r, c)), shape=(4 * n, len(x))).tocsr()
+    else:
+        Ts = np.stack([T[a] for a in keys])
+        col0 = np.array([columns(a)[0] if len(columns(a)) else -1 for a in keys])
+        pi, pj = e_i[edge], e_j[edge]
+        rows2 = np.arange(2 * n).reshape(n, 2)
+
+        def part(Hs, Hinv, a, b, pts_h, row_off):
+            # residual proj(H_b^-1 H_a p) - q: derivatives w.r.t. Hn_a (source) and Hn_b (target)
+            u = np.einsum("nij,nj->ni", Hinv[b] @ Hs[a], pts_h)
+            P = np.zeros((n, 2, 3))
+            P[:, 0, 0] = P[:, 1, 1] = 1 / u[:, 2]
+            P[:, :, 2] = -u[:, :2] / u[:, 2:] ** 2
+            B = P @ (Hinv[b] @ Tr_inv)
+            q = np.einsum("nij,nj->ni", Ts[a], pts_h)
+            w = np.einsum("nij,nj->ni", Ts[b], u)
+            out = []
+            for node, vec, sign in ((a, q, 1.0), (b, w, -1.0)):
+                vals = (sign * B[:, :, :, None] * vec[:, None, None, :]).reshape(n, 2, 9)[:, :, :8]
+                keep = col0[node] >= 0
+                r = np.broadcast_to((rows2 + row_off)[:, :, None], (n, 2, 8))[keep]
+                c = (col0[node][:, None, None] + np.arange(8)[None, None, :]).repeat(2, axis=1)[keep]
+                out.append((r.ravel(), c.ravel(), vals[keep].ravel()))
+            return out
+
+        def jac(x):
+            H = homs(x)
+            Hs = np.stack([H[a] for a in keys])
+            Hinv = np.linalg.inv(Hs)
+            parts = part(Hs, Hinv, pi, pj, src_h, 0) + part(Hs, Hinv, pj, pi, dst_h, 2 * n)
+            r, c, v = (np.concatenate([p_[k] for p_ in parts]) for k in range(3))
+            return coo_matrix((v, (r, c)), shape=(4 * n, len(x0))).tocsr()
+
+    x = levenberg_marquardt(residuals, jac, x0)
+    if not np.all(np.isfinite(x)):
         raise EstimationError("homography refinement diverged; set `refine: none` or raise `min_inliers`")
-    return res.x
+    return x
+
+
+def levenberg_marquardt(fun, jac, x0: np.ndarray, max_iter: int = 30, ftol: float = 1e-7) -> np.ndarray:
+    """Minimise ``|fun(x)|^2`` by Levenberg-Marquardt on the normal equations.
+
+    ``jac(x)`` returns the sparse (m, n) Jacobian. With n in the hundreds and m in the tens of thousands, forming
+    ``J^T J`` once per iteration is far cheaper than an iterative trust-region solver (``least_squares``' LSMR does
+    hundreds of length-m vector operations per step, which thread-contended BLAS makes slow on a shared machine).
+    Marquardt's scaling by ``diag(J^T J)`` makes the step invariant to the parameter units.
+
+    Returns
+    -------
+    (n,) float64
+        The parameters where the cost stopped decreasing by more than ``ftol`` (relative).
+    """
+    x = np.asarray(x0, np.float64).copy()
+    r = fun(x)
+    cost = float(r @ r)
+    lam = 1e-4
+    for _ in range(max_iter):
+        J = jac(x)
+        A = (J.T @ J).toarray()
+        g = J.T @ r
+        d = np.diag(A).copy()
+        d[d <= 0] = 1.0
+        while lam < 1e10:
+            try:
+                step = np.linalg.solve(A + lam * np.diag(d), -g)
+            except np.linalg.LinAlgError:
+                lam *= 10
+                continue
+            r_new = fun(x + step)
+            c_new = float(r_new @ r_new)
+            if np.isfinite(c_new) and c_new < cost:
+                break
+            lam *= 10
+        else:
+            return x  # no step lowers the cost: at a minimum
+        x, r, decrease, cost = x + step, r_new, cost - c_new, c_new
+        lam = max(lam / 10, 1e-12)
+        if decrease <= ftol * cost:
+            break
+    return x
 
 
 def refine_homographies(G: dict, edges: dict, sizes: Sequence[tuple[int, int]], reference: int,
@@ -498,7 +647,7 @@ def refine_homographies(G: dict, edges: dict, sizes: Sequence[tuple[int, int]], 
     def columns(a):
         return [] if a == reference else list(range(8 * slot[a], 8 * slot[a] + 8))
 
-    x = _solve(_blocks(G, edges, max_points_per_pair, rng), homs, x0, columns)
+    x = _solve(_blocks(G, edges, max_points_per_pair, rng), homs, x0, columns, T, Tr_inv)
     return {a: normalize_det(H) for a, H in homs(x).items()}
 
 
@@ -804,7 +953,8 @@ def stitch(images: Sequence[np.ndarray], features: PanoramaFeaturesParams = Pano
     t["features"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     graph = match_graph(feats, work_sizes, ratio=matching.ratio, ransac_threshold=matching.ransac_threshold,
-                        min_inliers=matching.min_inliers, min_confidence=matching.min_confidence, rng=rng)
+                        min_inliers=matching.min_inliers, min_confidence=matching.min_confidence,
+                        candidates=matching.candidates, rng=rng)
     t["match"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     reg = register(graph, refine=homographies.refine, max_points_per_pair=homographies.max_points_per_pair,

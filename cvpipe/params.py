@@ -204,15 +204,18 @@ class PanoramaFeaturesParams:
 
 @dataclass(frozen=True)
 class PanoramaMatchParams:
-    """``panorama.match``: pairwise matching and the acceptance of a pair as an edge of the match graph."""
+    """``panorama.match``: pairwise matching and the acceptance of a pair as an edge of the match graph; only each
+    image's ``candidates`` most promising partners are matched in full (0: every pair)."""
 
     ratio: float = 0.8
     ransac_threshold: float = 3.0
     min_inliers: int = 10
     min_confidence: float = 1.0
+    candidates: int = 5
     seed: int = 0
 
     def __post_init__(self):
+        _in_range("candidates", self.candidates, 0, None)
         _in_range("ratio", self.ratio, 0.0, 1.0, lo_open=True)
         _in_range("ransac_threshold", self.ransac_threshold, 0.0, None, lo_open=True)
         _in_range("min_inliers", self.min_inliers, 4, None)
@@ -225,7 +228,7 @@ class PanoramaHomographiesParams:
     (``refine``: auto, homography, rotation or none)."""
 
     refine: str = "homography"
-    max_points_per_pair: int = 200
+    max_points_per_pair: int = 100
 
     def __post_init__(self):
         if self.refine not in ("auto", "homography", "rotation", "none"):

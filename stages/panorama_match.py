@@ -25,7 +25,8 @@ def main() -> None:
         sizes = [tuple(int(v) for v in a["work_size"]) for a in arrays]
         t0 = time.perf_counter()
         graph = panorama.match_graph(feats, sizes, ratio=p.ratio, ransac_threshold=p.ransac_threshold,
-                                     min_inliers=p.min_inliers, min_confidence=p.min_confidence, rng=p.seed)
+                                     min_inliers=p.min_inliers, min_confidence=p.min_confidence,
+                                     candidates=p.candidates, rng=p.seed)
         io.save_npz(Path(args.out) / f"{d.name}.npz", **graph.to_arrays(),
                     files=[str(a["image_file"]) for a in arrays], full_sizes=[a["full_size"] for a in arrays],
                     seconds=time.perf_counter() - t0)
