@@ -280,6 +280,8 @@ def test_validation_errors(views):
         PanoramaHomographiesParams(refine="bundle")
     with pytest.raises(ValueError, match=r"`ratio` must be in \(0.0, 1.0\]"):
         PanoramaMatchParams(ratio=1.5)
+    with pytest.raises(ValueError, match=r"`candidates` must be in \[0, inf\]"):
+        PanoramaMatchParams(candidates=-1)
     with pytest.raises(ValueError, match=r"`min_inliers` must be in \[4, inf\]"):
         PanoramaMatchParams(min_inliers=3)
     with pytest.raises(ValueError, match=r"`max_points_per_pair` must be in \[4, inf\]"):
@@ -309,3 +311,28 @@ def test_gains_lower_the_ghosting_measure_on_real_views():
     w = warping.warp_images(comp.images, comp.G, "plane", comp.focal, comp.ref_size, 10.0)
     # exposure differences dominate the raw overlap difference; gain compensation removes most of it
     assert blending.overlap_difference(w, blending.gain_compensation(w)) < 0.5 * blending.overlap_difference(w)
+
+
+def _graph(imgs, candidates):
+    grays, sizes = panorama.working_images(imgs, 0.6)
+    feats = panorama.detect_all(grays, "sift", 1500)
+    return panorama.match_graph(feats, sizes, ratio=0.8, ransac_threshold=3.0, min_inliers=10, min_confidence=1.0,
+                                candidates=candidates, rng=0)
+
+
+def test_candidate_prefilter_skips_pairs_but_keeps_the_edges(views):
+    imgs, _ = views
+    graph = _graph(imgs, candidates=1)
+    # each view's single best partner is a neighbour: the two real overlaps are matched, the far pair is skipped
+    assert set(graph.edges) == {(0, 1), (1, 2)}
+    assert graph.rejected[(0, 2)].startswith("not a candidate pair")
+    assert graph.matches[0, 2] == 0
+
+
+def test_connectivity_repair_matches_skipped_bridges(views, monkeypatch):
+    imgs, _ = views
+    # a prefilter that misses the link to view 2: the repair must match a skipped pair joining the two groups
+    monkeypatch.setattr(panorama, "candidate_pairs", lambda feats, ratio, c: ([(0, 1)], {(0, 2): 9, (1, 2): 3}))
+    graph = _graph(imgs, candidates=1)
+    assert (1, 2) in graph.edges and (0, 1) in graph.edges
+    assert panorama.register(graph, refine="none", max_points_per_pair=50).used == (0, 1, 2)
