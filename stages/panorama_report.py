@@ -54,8 +54,8 @@ def main() -> None:
         rows.append([name, "opencv_stitcher", cv["ok"], len(cv["used"]), "-", None, cv_empty, None, cv["seconds"]])
         timings["ours"] += seconds
         timings["opencv_stitcher"] += cv["seconds"]
-        plot += [{"set": name, "method": "ours", "seconds": seconds},
-                 {"set": name, "method": "opencv_stitcher", "seconds": cv["seconds"]}]
+        plot += [{"label": f"{name} ours", "set": name, "method": "ours", "seconds": seconds},
+                 {"label": f"{name} cv2.Stitcher", "set": name, "method": "opencv_stitcher", "seconds": cv["seconds"]}]
     columns = ["set", "method", "stitched", "images used", "dropped (why)", "median corner error px",
                "empty share", "ghosting (grey levels)", "seconds"]
     io.save_json(out / "metrics.json", {"rows": [dict(zip(columns, r)) for r in rows]})
