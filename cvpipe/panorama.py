@@ -10,8 +10,8 @@ The stages, in the order :func:`stitch` runs them (each is a pure function so th
 3. :func:`register` keeps the largest connected component (the other images are dropped with a reason), picks the
    reference image at the centre of the maximum spanning tree of the confidence graph, chains homographies along
    that tree, and refines all of them jointly by least squares over the inliers of every accepted pair
-   (Levenberg-Marquardt, :func:`levenberg_marquardt`). :func:`estimate_focal` gives the focal length that the cylindrical and
-   spherical projections need.
+   (Levenberg-Marquardt, :func:`levenberg_marquardt`). :func:`estimate_focal` gives the focal length that the
+   cylindrical and spherical projections need.
 4. :mod:`cvpipe.warping` and :mod:`cvpipe.blending` compose the result.
 
 Homographies map homogeneous pixel column vectors (x = column, y = row). A global homography ``G[i]`` maps pixels

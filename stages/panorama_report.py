@@ -5,7 +5,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cvpipe import blending, io, panorama, warping
+from cvpipe import blending, io, panorama
+from cvpipe.metrics import corner_error
 
 
 def _corner_error(h: dict, truth: dict) -> float | None:
@@ -20,10 +21,8 @@ def _corner_error(h: dict, truth: dict) -> float | None:
     errs = []
     for p in range(len(used)):
         for q in range(p + 1, len(used)):
-            w, hh = h["full_sizes"][used[p]]
-            c = np.array([[0, 0], [w - 1, 0], [w - 1, hh - 1], [0, hh - 1]], float)
             ours, true = np.linalg.inv(G[q]) @ G[p], np.linalg.inv(T[q]) @ T[p]
-            errs.append(np.linalg.norm(warping.apply_h(ours, c) - warping.apply_h(true, c), axis=1).mean())
+            errs.append(corner_error(ours, true, *h["full_sizes"][used[p]]))
     return float(np.median(errs))
 
 
@@ -48,7 +47,8 @@ def main() -> None:
             seams = io.read_image(Path(args.blend) / f"{name}_seams.png", "gray") > 0
             over = blending.overlay_seams(io.read_image(Path(args.blend) / f"{name}.png"), seams)
             io.save_image(out / "report" / f"{name}_seams.png", blending.side_by_side([over], over.shape[0]))
-            pictures.append({"path": str(out / "report" / f"{name}_seams.png"), "caption": f"{name}: our seam lines (red)"})
+            pictures.append({"path": str(out / "report" / f"{name}_seams.png"),
+                             "caption": f"{name}: our seam lines (red)"})
         seconds = h["seconds"] + sum(x.get("seconds", 0.0) for x in (b, c))
         dropped = "; ".join(f"{d['image']}: {d['reason']}" for d in h.get("dropped", []))
         rows.append([name, "ours", c["ok"], len(h.get("used", [])), dropped or "-", _corner_error(h, truth[name]),

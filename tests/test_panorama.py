@@ -336,3 +336,19 @@ def test_connectivity_repair_matches_skipped_bridges(views, monkeypatch):
     graph = _graph(imgs, candidates=1)
     assert (1, 2) in graph.edges and (0, 1) in graph.edges
     assert panorama.register(graph, refine="none", max_points_per_pair=50).used == (0, 1, 2)
+
+
+def test_real_weir_set_drops_the_distractor(data_root):
+    from cvpipe import io
+
+    folder = data_root / "stitching_tutorial" / "imgs"
+    if not (folder / "weir_noise.jpg").exists():
+        pytest.skip("stitching_tutorial not in the data root")
+    names = ["weir_2.jpg", "weir_noise.jpg", "weir_3.jpg", "weir_1.jpg"]
+    imgs = [io.read_image(folder / n) for n in names]
+    pano = panorama.stitch(imgs, warp=PanoramaWarpParams(projection="spherical", compose_megapix=0.2), rng=0)
+    # the three weir views overlap; the tutorial's noise picture shares nothing with them
+    assert pano.registration.used == (0, 2, 3)
+    (k, why), = pano.registration.dropped
+    assert names[k] == "weir_noise.jpg" and "shares no accepted pair" in why
+    assert pano.mask.all() and pano.image.shape[1] > 2 * pano.image.shape[0]

@@ -21,6 +21,7 @@ import numpy as np
 
 from .. import blending, io, panorama, warping
 from ..errors import EstimationError, InputError
+from ..metrics import corner_error
 from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
                       PanoramaWarpParams)
 
@@ -52,11 +53,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
 
 
-def _corners(size) -> np.ndarray:
-    w, h = size
-    return np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], float)
-
-
 def _gt_pairs(folder: Path, files: list[str]) -> dict[tuple[int, int], np.ndarray]:
     """Ground-truth homographies (input position i -> j) of the Adobe files that are in ``files``."""
     pos = {int(re.search(r"-(\d+)\.", f).group(1)): k for k, f in enumerate(files)}
@@ -76,8 +72,7 @@ def _accuracy(pano: panorama.Panorama, gt: dict, sizes: list) -> dict:
         if i not in pano.homographies or j not in pano.homographies:
             continue
         H = np.linalg.inv(pano.homographies[j]) @ pano.homographies[i]
-        c = _corners(sizes[i])
-        e = float(np.linalg.norm(warping.apply_h(H, c) - warping.apply_h(H_gt, c), axis=1).mean())
+        e = corner_error(H, H_gt, *sizes[i])
         corner.append(e)
         if abs(i - j) == 1:
             adjacent.append(e)
@@ -101,8 +96,7 @@ def _gt_consistency(gt: dict, sizes: list) -> float | None:
     for (i, j), H in gt.items():
         for (a, k), H1 in gt.items():
             if a == i and (k, j) in gt and k != j:
-                c = _corners(sizes[i])
-                errs.append(np.linalg.norm(warping.apply_h(gt[(k, j)] @ H1, c) - warping.apply_h(H, c), axis=1).mean())
+                errs.append(corner_error(gt[(k, j)] @ H1, H, *sizes[i]))
     return float(np.median(errs)) if errs else None
 
 
@@ -191,7 +185,8 @@ def run(args: argparse.Namespace) -> int:
     for r in results:
         print(f"{r['set']:15s} {str(r['ours_ok']):>5s} {r['opencv_status'] + ' ' + str(len(r['opencv_used'])):>28s} "
               f"{len(r.get('used', [])):>5d} {fmt(r.get('corner_error_median'), '.2f'):>9s} "
-              f"{fmt(r.get('corner_error_adjacent_median'), '.2f'):>7s} {fmt(r.get('overlap_error_median'), '.2f'):>7s} "
+              f"{fmt(r.get('corner_error_adjacent_median'), '.2f'):>7s} "
+              f"{fmt(r.get('overlap_error_median'), '.2f'):>7s} "
               f"{fmt(r.get('empty_share'), '.3f'):>6s} {fmt(r.get('ghosting'), '.2f'):>6s} "
               f"{r['ours_seconds']:7.2f} {r['opencv_seconds']:6.2f} {r['time_ratio']:5.2f}")
         for f, why in r.get("dropped", {}).items():
