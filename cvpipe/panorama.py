@@ -31,6 +31,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 from scipy.sparse import coo_matrix
+from numba import njit
 from scipy.spatial.transform import Rotation
 
 from . import blending, warping
@@ -553,6 +554,46 @@ def _solve(blocks: list, homs, x0: np.ndarray, columns, T: dict | None = None,
     return x
 
 
+@njit(cache=True)
+def _cholesky_solve_kernel(A, b):
+    n = A.shape[0]
+    L = np.zeros_like(A)
+    for j in range(n):
+        s = A[j, j]
+        for k in range(j):
+            s -= L[j, k] * L[j, k]
+        if s <= 0.0:
+            return np.full(n, np.nan)
+        L[j, j] = np.sqrt(s)
+        for i in range(j + 1, n):
+            s = A[i, j]
+            for k in range(j):
+                s -= L[i, k] * L[j, k]
+            L[i, j] = s / L[j, j]
+    y = np.zeros(n)
+    for i in range(n):
+        s = b[i]
+        for k in range(i):
+            s -= L[i, k] * y[k]
+        y[i] = s / L[i, i]
+    x = np.zeros(n)
+    for i in range(n - 1, -1, -1):
+        s = y[i]
+        for k in range(i + 1, n):
+            s -= L[k, i] * x[k]
+        x[i] = s / L[i, i]
+    return x
+
+
+def _cholesky_solve(A: np.ndarray, b: np.ndarray) -> np.ndarray | None:
+    """Solve the symmetric positive definite system ``A x = b`` single-threaded (numba); None when not SPD.
+
+    The systems are small (8 parameters per image); a threaded LAPACK call costs more in thread start-up than in
+    arithmetic on a busy machine."""
+    x = _cholesky_solve_kernel(np.ascontiguousarray(A, np.float64), np.ascontiguousarray(b, np.float64))
+    return None if not np.all(np.isfinite(x)) else x
+
+
 def levenberg_marquardt(fun, jac, x0: np.ndarray, max_iter: int = 30, ftol: float = 1e-7) -> np.ndarray:
     """Minimise ``|fun(x)|^2`` by Levenberg-Marquardt on the normal equations.
 
@@ -577,9 +618,8 @@ def levenberg_marquardt(fun, jac, x0: np.ndarray, max_iter: int = 30, ftol: floa
         d = np.diag(A).copy()
         d[d <= 0] = 1.0
         while lam < 1e10:
-            try:
-                step = np.linalg.solve(A + lam * np.diag(d), -g)
-            except np.linalg.LinAlgError:
+            step = _cholesky_solve(A + lam * np.diag(d), -g)
+            if step is None:
                 lam *= 10
                 continue
             r_new = fun(x + step)

@@ -119,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
            "blend": PanoramaBlendParams()}
     t0 = time.perf_counter()
     blending.largest_rectangle(np.ones((4, 4), bool))  # numba: load or compile once, timed on its own
+    panorama._cholesky_solve(np.eye(2), np.ones(2))
     compile_seconds = time.perf_counter() - t0
     results = []
     for name in args.sets:
