@@ -193,12 +193,8 @@ def warp_image(img: np.ndarray, G: np.ndarray, box: Sequence[int], projection: s
     mx = np.where(ok, x, np.float32(-10)).astype(np.float32, copy=False)
     my = np.where(ok, y, np.float32(-10)).astype(np.float32, copy=False)
     warped = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    mask = ok.astype(np.uint8) * 255
-    if warped.ndim == 3:
-        warped[~ok] = 0
-    else:
-        warped[~ok] = 0
-    return warped, mask
+    warped[~ok] = 0
+    return warped, ok.astype(np.uint8) * 255
 
 
 def warp_images(images: Sequence[np.ndarray], G: Sequence[np.ndarray], projection: str, focal: float,
