@@ -374,3 +374,93 @@ SECTIONS.update({
     "defect.diff": DefectDiffParams,
     "defect.regions": DefectRegionParams,
 })
+
+
+# ---------------------------------------------------------------------------------------------------- panorama
+
+
+@dataclass(frozen=True)
+class PanoramaFeaturesParams:
+    """``panorama.features``: features at the registration resolution (``work_megapix`` million pixels, <= 0 means
+    full resolution; ``cv2.Stitcher`` uses 0.6)."""
+
+    detector: str = "sift"
+    max_features: int = 1500
+    work_megapix: float = 0.6
+
+    def __post_init__(self):
+        _in_range("max_features", self.max_features, 1, 1_000_000)
+        _in_range("work_megapix", self.work_megapix, None, 1000)
+
+
+@dataclass(frozen=True)
+class PanoramaMatchParams:
+    """``panorama.match``: pairwise matching and the acceptance of a pair as an edge of the match graph; only each
+    image's ``candidates`` most promising partners are matched in full (0: every pair)."""
+
+    ratio: float = 0.8
+    ransac_threshold: float = 3.0
+    min_inliers: int = 10
+    min_confidence: float = 1.0
+    candidates: int = 5
+    seed: int = 0
+
+    def __post_init__(self):
+        _in_range("candidates", self.candidates, 0, None)
+        _in_range("ratio", self.ratio, 0.0, 1.0, lo_open=True)
+        _in_range("ransac_threshold", self.ransac_threshold, 0.0, None, lo_open=True)
+        _in_range("min_inliers", self.min_inliers, 4, None)
+        _in_range("min_confidence", self.min_confidence, 0.0, None)
+
+
+@dataclass(frozen=True)
+class PanoramaHomographiesParams:
+    """``panorama.homographies``: chaining along the maximum spanning tree, then joint least-squares refinement
+    (``refine``: auto, homography, rotation or none)."""
+
+    refine: str = "homography"
+    max_points_per_pair: int = 100
+
+    def __post_init__(self):
+        if self.refine not in ("auto", "homography", "rotation", "none"):
+            raise ValueError(f"`refine` must be one of ['auto', 'homography', 'rotation', 'none'], got {self.refine!r}")
+        _in_range("max_points_per_pair", self.max_points_per_pair, 4, None)
+
+
+@dataclass(frozen=True)
+class PanoramaWarpParams:
+    """``panorama.warp``: projection and compose resolution (``compose_megapix`` <= 0 means full resolution)."""
+
+    projection: str = "plane"
+    compose_megapix: float = -1.0
+    max_canvas_megapix: float = 200.0
+
+    def __post_init__(self):
+        if self.projection not in ("plane", "cylindrical", "spherical"):
+            raise ValueError(f"`projection` must be one of ['plane', 'cylindrical', 'spherical'], "
+                             f"got {self.projection!r}")
+        _in_range("compose_megapix", self.compose_megapix, None, 1000)
+        _in_range("max_canvas_megapix", self.max_canvas_megapix, 0.0, None, lo_open=True)
+
+
+@dataclass(frozen=True)
+class PanoramaBlendParams:
+    """``panorama.blend``: gain compensation and the blender (multi-band with ``bands`` levels, or feather)."""
+
+    blender: str = "multiband"
+    bands: int = 5
+    gain_compensation: bool = True
+
+    def __post_init__(self):
+        if self.blender not in ("multiband", "feather"):
+            raise ValueError(f"`blender` must be one of ['feather', 'multiband'], got {self.blender!r}")
+        _in_range("bands", self.bands, 1, 12)
+
+
+SECTIONS.update({
+    "panorama.features": PanoramaFeaturesParams,
+    "panorama.match": PanoramaMatchParams,
+    "panorama.homographies": PanoramaHomographiesParams,
+    "panorama.warp": PanoramaWarpParams,
+    "panorama.blend": PanoramaBlendParams,
+})
