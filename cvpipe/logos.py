@@ -10,8 +10,8 @@ extreme anisotropy or perspective, and the inliers must cover a fair part of the
 
 The score is an a-contrario significance, ``-log10`` of the expected number of equally good chance fits: the
 binomial tail of seeing ``inliers - 4`` of the ``matches - 4`` other matches land within the RANSAC threshold of
-their prediction when they are spread at random over the area the matches cover, multiplied by the number of
-4-point hypotheses and of references tried. Unlike a raw inlier count, it does not grow with the number of
+their prediction when they are spread at random over the scene, multiplied by the number of 4-point hypotheses and
+of references tried. Unlike a raw inlier count, it does not grow with the number of
 tentative matches that a cluttered scene or a feature-rich reference produces, so it is comparable across brands
 and separates true logos from the 6-10 inlier fits that RANSAC finds on any busy photo.
 
@@ -292,8 +292,8 @@ def match_scene(gallery: Gallery, scene: Features, params: LogoMatchParams | Non
 
     Each scene descriptor gets its ``k`` nearest gallery descriptors. A neighbour of brand B is kept when its
     distance is below ``ratio`` times the distance of the nearest neighbour of any other brand (or of the k-th
-    neighbour when all k belong to B), and only the first neighbour per reference counts. Afterwards every
-    reference keypoint keeps only its closest scene keypoint, so the matches of a reference are one-to-one.
+    neighbour when all k belong to B), and at most the first ``per_reference`` neighbours in one reference count.
+    Afterwards every reference keypoint keeps only its closest scene keypoint.
 
     Parameters
     ----------
@@ -301,7 +301,7 @@ def match_scene(gallery: Gallery, scene: Features, params: LogoMatchParams | Non
     scene : Features
         From the same detector as the gallery.
     params : LogoMatchParams, optional
-        ``ratio`` and ``k``; defaults from :class:`cvpipe.params.LogoMatchParams`.
+        ``ratio``, ``k`` and ``per_reference``; defaults from :class:`cvpipe.params.LogoMatchParams`.
     """
     p = params or LogoMatchParams()
     if scene.detector != gallery.detector:
@@ -329,9 +329,10 @@ def match_scene(gallery: Gallery, scene: Features, params: LogoMatchParams | Non
         first = np.where(differs.any(1), dist[np.arange(n), np.argmax(differs, 1)], last)
         other[:, j] = first
     keep = valid & (dist < p.ratio * other)
-    # first neighbour per reference only
+    # at most `per_reference` neighbours in one reference: 2 keeps both twins of a symmetric mark (RANSAC picks the
+    # consistent one), where 1 would keep a random twin and halve the inliers
     for j in range(1, k):
-        keep[:, j] &= ~(ref[:, :j] == ref[:, j:j + 1]).any(1)
+        keep[:, j] &= (ref[:, :j] == ref[:, j:j + 1]).sum(1) < p.per_reference
     rows, cols = np.nonzero(keep)
     if len(rows) == 0:
         return empty
@@ -428,7 +429,7 @@ def significance(inliers: int, matches: int, threshold: float, area: float, n_re
     threshold : float
         RANSAC reprojection threshold, scene pixels.
     area : float
-        Scene area (px^2) over which chance matches spread: the convex hull of the tentative matches.
+        Scene area (px^2) over which chance matches spread.
     n_refs : int
         Number of references tested in this scene (multiple tests).
     """
@@ -444,9 +445,33 @@ def significance(inliers: int, matches: int, threshold: float, area: float, n_re
     return float(-(log_tail + log_hyp + np.log10(max(n_refs, 1))))
 
 
+def _check(brand: str, r: int, ref: Reference, H: np.ndarray, inl: np.ndarray, src: np.ndarray, dst: np.ndarray,
+           g_idx: np.ndarray, s_idx: np.ndarray, scene_size: tuple[int, int], n_tested: int,
+           p: LogoVerifyParams) -> Hypothesis:
+    """Plausibility checks and score of one fitted model (see :func:`verify`)."""
+    n_in = int(inl.sum())
+    pairs = np.c_[g_idx[inl], s_idx[inl]]
+    reason = shape_problem(H, ref.outline, scene_size, p)
+    quad = None if reason.startswith("outline crosses") else project(H, ref.outline)
+    if not reason and n_in < p.min_inliers:
+        reason = f"{n_in} inliers < {p.min_inliers}"
+    if not reason:
+        spread = _hull_area(src[inl]) / ref.area
+        if spread < p.min_spread:
+            reason = f"inliers cover {spread:.3f} of the reference < {p.min_spread}"
+    score = -np.inf
+    if not reason:
+        area = float(scene_size[0] * scene_size[1])
+        score = significance(n_in, len(src), p.ransac_threshold, area, n_tested)
+    return Hypothesis(brand, r, len(src), n_in, score, H, quad, pairs, reason)
+
+
 def verify(gallery: Gallery, matches: Matches, scene_xy: np.ndarray, scene_size: tuple[int, int],
            params: LogoVerifyParams | None = None, rng=None) -> list[Hypothesis]:
     """Fit and check one homography per reference that has at least ``min_matches`` tentative matches.
+
+    When the best RANSAC fit fails the checks, its inliers are set aside and the remaining matches are fitted
+    again (at most ``max_models`` fits per reference); the number of fits enters the score's multiple-test count.
 
     Parameters
     ----------
@@ -480,28 +505,29 @@ def verify(gallery: Gallery, matches: Matches, scene_xy: np.ndarray, scene_size:
         src, dst = ref.features.xy[g_idx].astype(np.float64), scene_xy[s_idx]
         brand = ref.brand
         none = np.zeros((0, 2), np.int64)
-        try:
-            fit = find_homography(src, dst, threshold=p.ransac_threshold, confidence=0.999,
-                                  max_iters=p.max_iters, rng=rng)
-        except EstimationError as exc:
-            out.append(Hypothesis(brand, int(r), len(src), 0, -np.inf, None, None, none, f"no homography: {exc}"))
-            continue
-        H, inl = fit.H, np.asarray(fit.inliers, bool)
-        n_in = int(inl.sum())
-        pairs = np.c_[g_idx[inl], s_idx[inl]]
-        reason = shape_problem(H, ref.outline, scene_size, p)
-        quad = None if reason.startswith("outline crosses") else project(H, ref.outline)
-        if not reason and n_in < p.min_inliers:
-            reason = f"{n_in} inliers < {p.min_inliers}"
-        if not reason:
-            spread = _hull_area(src[inl]) / ref.area
-            if spread < p.min_spread:
-                reason = f"inliers cover {spread:.3f} of the reference < {p.min_spread}"
-        score = -np.inf
-        if not reason:
-            score = significance(n_in, len(src), p.ransac_threshold, max(_hull_area(dst), (10 * p.ransac_threshold) ** 2),
-                                 len(tested))
-        out.append(Hypothesis(brand, int(r), len(src), n_in, score, H, quad, pairs, reason))
+        hyp, left = None, np.ones(len(src), bool)
+        # sequential RANSAC: an implausible best fit (a chance fit, or a fold made by the twin matches of a
+        # symmetric mark) gives its inliers up and the rest is fitted again, up to `max_models` times
+        for attempt in range(1, p.max_models + 1):
+            if left.sum() < p.min_matches:
+                break
+            try:
+                fit = find_homography(src[left], dst[left], threshold=p.ransac_threshold, confidence=0.999,
+                                      max_iters=p.max_iters, rng=rng)
+            except EstimationError as exc:
+                if hyp is None:
+                    hyp = Hypothesis(brand, int(r), len(src), 0, -np.inf, None, None, none, f"no homography: {exc}")
+                break
+            inl = np.zeros(len(src), bool)
+            inl[np.flatnonzero(left)[np.asarray(fit.inliers, bool)]] = True
+            cand = _check(brand, int(r), ref, fit.H, inl, src, dst, g_idx, s_idx, scene_size,
+                          len(tested) * attempt, p)
+            if hyp is None or (hyp.reason and not cand.reason):
+                hyp = cand
+            if not cand.reason:
+                break
+            left &= ~inl
+        out.append(hyp)
     out.sort(key=lambda h: (h.score, h.inliers), reverse=True)
     return out
 

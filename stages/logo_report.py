@@ -36,9 +36,11 @@ def main() -> None:
                          f"{len(recs)} sample scenes (rows = truth, columns = decision, last = none)"})
     best = max(rows, key=lambda r: (r[1], -r[5]))[0]
     recs = results[best]
-    shown = [r for r in recs if r["brand"]][:4] + [r for r in recs if r["truth"] and r["brand"] != r["truth"]][:2]
+    shown = [r for r in recs if r["brand"]][:4] + [r for r in recs if r["truth"] != r["brand"]][:2]
     for r in shown:
         stem = Path(r["scene"]).stem
+        if r["best_brand"] is None:  # nothing plausible was found: no inliers to draw
+            continue
         pairs = io.load_npz(Path(args.verify) / best / f"{stem}.npz")
         ref = io.read_image(gallery[r["brand"] or r["best_brand"]], "color")
         scene = io.read_image(samples / "scenes" / r["scene"], "color")

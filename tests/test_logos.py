@@ -61,6 +61,13 @@ def _scene(mark: np.ndarray | None, H: np.ndarray | None, background: str = "cof
     return cv2.cvtColor(np.clip(noisy, 0, 255).astype(np.uint8), cv2.COLOR_BGR2GRAY)
 
 
+def _region_error(quad, truth) -> float:
+    """Mean corner distance up to the order of the corners: a mark with rotational symmetry (the python logo) or a
+    gallery view stored rotated legitimately starts its outline at another corner of the same region."""
+    q = np.asarray(quad, np.float64)
+    return min(logos.quad_error(np.roll(q, i, axis=0), truth) for i in range(4))
+
+
 PERSP = [[0.03, -0.02], [-0.04, 0.02], [0.02, 0.05], [-0.01, -0.03]]
 
 
@@ -150,7 +157,7 @@ def test_bundled_style_samples_all_right():
         assert det.brand == sc["brand"], sc["file"]
         if sc["brand"]:
             # the generator degrades with blur, noise and JPEG: 4 px is ~2-4% of a 100-220 px logo
-            assert logos.quad_error(det.quad, sc["quad"]) < 4.0, sc["file"]
+            assert _region_error(det.quad, sc["quad"]) < 4.0, sc["file"]
 
 
 # ------------------------------------------------------------------------------------------- score and checks
@@ -168,7 +175,7 @@ def test_significance_penalises_many_matches_and_rewards_inliers():
     (np.diag([-1.0, 1.0, 1.0]) @ np.array([[1, 0, -300], [0, 1, 0], [0, 0, 1.0]]), "mirrored"),
     (np.diag([0.05, 0.05, 1.0]), "covers"),
     (np.diag([3.0, 0.3, 1.0]), "anisotropy"),
-    (np.array([[1, 0, 0], [0, 1, 0], [0.004, 0, 1.0]]), "perspective"),
+    (np.array([[1, 0, 0], [0, 1, 0], [0.0125, 0, 1.0]]), "perspective"),
     (np.array([[1, 0, 0], [0, 1, 0], [-0.01, 0, 1.0]]), "horizon"),
 ])
 def test_shape_problems(H, reason):
@@ -262,9 +269,11 @@ def test_draw_confusion_shape():
 @pytest.mark.parametrize("cls, kwargs, match", [
     (LogoMatchParams, {"ratio": 0.0}, "`ratio` must be in"),
     (LogoMatchParams, {"k": 1}, "`k` must be in"),
+    (LogoMatchParams, {"per_reference": 9}, "`per_reference` must be in"),
     (LogoMatchParams, {"min_features": 2}, "`min_features` must be in"),
     (LogoVerifyParams, {"ransac_threshold": 0.0}, "`ransac_threshold` must be in"),
     (LogoVerifyParams, {"max_iters": 0}, "`max_iters` must be in"),
+    (LogoVerifyParams, {"max_models": 0}, "`max_models` must be in"),
     (LogoVerifyParams, {"min_matches": 3}, "`min_matches` must be in"),
     (LogoVerifyParams, {"min_inliers": 3}, "`min_inliers` must be in"),
     (LogoVerifyParams, {"min_area": 0.0}, "`min_area` must be in"),
@@ -306,7 +315,7 @@ def test_cli_bad_scene_among_good(tmp_path, gallery_dir, marks, capsys):
     records = json.loads(out)
     assert [r["scene"] for r in records] == [str(good), str(broken), str(empty)]
     assert records[0]["brand"] == "brand1" and len(records[0]["quad"]) == 4
-    assert logos.quad_error(np.array(records[0]["quad"]), logos.project(H, logos.outline((200, 200)))) < 2.5
+    assert _region_error(records[0]["quad"], logos.project(H, logos.outline((200, 200)))) < 2.5
     assert "error" in records[1] and "broken.jpg" in records[1]["error"] and records[1]["brand"] is None
     assert records[2]["brand"] is None and records[2]["quad"] is None and "error" not in records[2]
     assert err.count("cvpipe: error:") == 1 and "broken.jpg" in err
