@@ -3,8 +3,6 @@
 import argparse
 from pathlib import Path
 
-from tqdm import tqdm
-
 from cvpipe import features, io
 from cvpipe.params import FeaturesParams, load_section
 
@@ -23,7 +21,7 @@ def main() -> None:
     files = sorted(f for f in root.rglob("*") if f.suffix.lower() in io.IMAGE_SUFFIXES)
     if not files:
         raise SystemExit(f"cvpipe: error: {root}: no images found")
-    for f in tqdm(files, desc=f"features {detector}", disable=None):
+    for f in io.progress(files, f"features {detector}"):
         gray = io.read_image(f, "gray")
         feats = features.detect(gray, detector, p.max_features)
         rel = f.relative_to(root).with_suffix(".npz")

@@ -3,8 +3,6 @@
 import argparse
 from pathlib import Path
 
-from tqdm import tqdm
-
 from cvpipe import io, matching
 from cvpipe.features import Features
 from cvpipe.params import MatchParams, load_section
@@ -20,7 +18,7 @@ def main() -> None:
     p = load_section(MatchParams, "homography.match", args.params)
     feats_dir, out = Path(args.features), Path(args.out)
     counts = {}
-    for pair in tqdm(io.load_json(args.truth)["pairs"], desc="match", disable=None):
+    for pair in io.progress(io.load_json(args.truth)["pairs"], "match"):
         fa = Features.from_arrays(io.load_npz(feats_dir / Path(pair["a"]).with_suffix(".npz")))
         fb = Features.from_arrays(io.load_npz(feats_dir / Path(pair["b"]).with_suffix(".npz")))
         idx = matching.match(fa.descriptors, fb.descriptors, p.ratio, p.cross_check, fa.binary)

@@ -5,8 +5,6 @@ import shutil
 import time
 from pathlib import Path
 
-from tqdm import tqdm
-
 from cvpipe import io, samples
 from cvpipe.params import SamplesParams, load_section
 
@@ -22,7 +20,7 @@ def main() -> None:
     out = Path(args.out)
     tmp = out.with_name(f".{out.name}.tmp")
     shutil.rmtree(tmp, ignore_errors=True)
-    for task, s in tqdm(sets.items(), desc="samples", disable=None):
+    for task, s in io.progress(sets.items(), "samples"):
         for name, img in s.images.items():
             io.save_image(tmp / task / name, img)
         for name, arrays in s.arrays.items():

@@ -24,9 +24,21 @@ def reproduced(tmp_path_factory, repo_root):
 
 def test_fresh_clone_repro_runs_every_stage(reproduced):
     repo, out = reproduced
-    assert {"samples", "homography_features", "homography_match"} <= ran(out)
+    assert {"samples", "homography_features", "homography_match", "report"} <= ran(out)
     assert (repo / "data/samples/homography/truth.json").is_file()
+    assert (repo / "outputs/report.html").is_file() and (repo / "outputs/plots/timings.json").is_file()
     assert (repo / "outputs/homography/matches/summary.json").is_file()
+
+
+def test_dvc_plots_show_writes_its_page(reproduced, tmp_path):
+    import json
+
+    repo, _ = reproduced
+    dvc(["plots", "show", "-o", str(tmp_path / "plots")], repo)
+    assert (tmp_path / "plots" / "index.html").is_file()
+    shown = json.loads(dvc(["plots", "show", "--json"], repo).stdout)
+    assert "outputs/plots/timings.json" in shown["data"]  # every declared plot file was found and parsed
+    assert "errors" not in shown, shown["errors"]
 
 
 def test_second_repro_runs_nothing(reproduced):
