@@ -614,14 +614,19 @@ def evaluate(truth: Sequence[str | None], predicted: Sequence[str | None], score
     return result
 
 
-def quad_error(quad: np.ndarray | None, truth: np.ndarray | Sequence | None) -> float | None:
-    """Mean distance in pixels between corresponding corners of two (4, 2) quads (None when either is None)."""
+def quad_error(quad: np.ndarray | None, truth: np.ndarray | Sequence | None, cyclic: bool = False) -> float | None:
+    """Mean distance in pixels between corresponding corners of two (4, 2) quads (None when either is None).
+
+    With ``cyclic`` the smallest error over the four starting corners of ``quad``: the outline of a mark with
+    rotational symmetry (or of a gallery view stored rotated) may legitimately start at another corner.
+    """
     if quad is None or truth is None:
         return None
     q, t = np.asarray(quad, np.float64), np.asarray(truth, np.float64)
     if q.shape != (4, 2) or t.shape != (4, 2):
         raise ValueError(f"quads must be (4, 2), got {q.shape} and {t.shape}")
-    return float(np.linalg.norm(q - t, axis=1).mean())
+    shifts = range(4) if cyclic else range(1)
+    return float(min(np.linalg.norm(np.roll(q, i, axis=0) - t, axis=1).mean() for i in shifts))
 
 
 # --------------------------------------------------------------------------------------------------- pictures

@@ -45,7 +45,8 @@ def main() -> None:
                "quad": None if det.quad is None else det.quad.tolist(), "truth": truth[name]["brand"],
                "truth_quad": truth[name]["quad"], "best_brand": best.brand if best else None,
                "reference": gallery.references[best.reference].name if best else None,
-               "quad_error_px": logos.quad_error(det.quad, truth[name]["quad"]) if det.brand and det.brand == truth[name]["brand"] else None,
+               "quad_error_px": (logos.quad_error(det.quad, truth[name]["quad"], cyclic=True)
+                                 if det.brand and det.brand == truth[name]["brand"] else None),
                "seconds": elapsed}
         records.append(rec)
         if best is not None:
