@@ -16,6 +16,7 @@ def main() -> None:
     ap.add_argument("--methods", nargs="+", required=True)
     ap.add_argument("--out", required=True, help="outputs/logo/report")
     ap.add_argument("--summary", required=True, help="outputs/logo/summary.json")
+    ap.add_argument("--plots", required=True, help="outputs/logo/plots: pr_<method>.json for `dvc plots`")
     args = ap.parse_args()
     samples, out = Path(args.samples), Path(args.out)
     brands = io.load_json(samples / "truth.json")["brands"]
@@ -24,6 +25,7 @@ def main() -> None:
     for m in args.methods:
         recs = io.load_json(Path(args.verify) / m / "decisions.json")["scenes"]
         results[m] = recs
+        io.save_json(Path(args.plots) / f"pr_{m}.json", io.load_json(Path(args.verify) / m / "pr.json"))
         truth, pred = [r["truth"] for r in recs], [r["brand"] for r in recs]
         ev = logos.evaluate(truth, pred, [r["score"] if r["brand"] else -np.inf for r in recs], -np.inf)
         errs = [r["quad_error_px"] for r in recs if r["quad_error_px"] is not None]

@@ -1,4 +1,4 @@
-"""Stage `logo_verify@det`: homography verification and the brand decision per scene, with metrics and PR curve."""
+"""Stage `logo_verify@det`: homography verification and the brand decision per scene, metrics, PR curve (pr.json)."""
 
 import argparse
 import math
@@ -21,7 +21,6 @@ def main() -> None:
     ap.add_argument("--truth", required=True, help="data/samples/logo/truth.json")
     ap.add_argument("--out", required=True, help="folder for decisions.json and inlier pairs")
     ap.add_argument("--metrics", required=True, help="metrics JSON file")
-    ap.add_argument("--plot", required=True, help="precision-recall curve JSON file")
     ap.add_argument("--params", default="params.yaml")
     args = ap.parse_args()
     mp = load_section(LogoMatchParams, "logo.match", args.params)
@@ -61,7 +60,7 @@ def main() -> None:
                                                   "scenes", "positives")}
                  | {"time_per_scene_s": sorted(r["seconds"] for r in records)[len(records) // 2],
                     "quad_error_px_median": sorted(errs)[len(errs) // 2] if errs else None})
-    io.save_json(args.plot, [dict(c, method=gallery.detector) for c in ev["curve"]])
+    io.save_json(out / "pr.json", [dict(c, method=gallery.detector) for c in ev["curve"]])
 
 
 if __name__ == "__main__":
