@@ -372,3 +372,24 @@ def test_flickrlogos_protocol(data_root):
 def test_bench_refuses_wrong_root(tmp_path, capsys):
     assert cli.main(["bench", "logo", "--data", str(tmp_path)]) == 2
     assert "scenes.csv: no such file" in capsys.readouterr().err
+
+
+def test_bench_min_box_validated(tmp_path, capsys):
+    assert cli.main(["bench", "logo", "--data", str(tmp_path), "--min-box", "0"]) == 2
+    assert "`--min-box` must be a positive number" in capsys.readouterr().err
+
+
+def test_bench_needs_a_data_root(monkeypatch, capsys):
+    monkeypatch.delenv("CVPIPE_DATA", raising=False)
+    assert cli.main(["bench", "logo"]) == 2
+    assert "no data root" in capsys.readouterr().err
+
+
+def test_cli_bad_max_features(gallery_dir, capsys):
+    assert cli.main(["logo", "x.jpg", "--gallery", str(gallery_dir), "--max-features", "0"]) == 2
+    assert "`--max-features` must be a positive integer" in capsys.readouterr().err
+
+
+def test_cli_missing_gallery_folder(tmp_path, capsys):
+    assert cli.main(["logo", "x.jpg", "--gallery", str(tmp_path / "nope")]) == 2
+    assert "gallery folder does not exist" in capsys.readouterr().err

@@ -2,9 +2,9 @@
 
 Protocol (see the data set's SOURCE.txt): the gallery is every box of the 80 boxed training photos, cropped, plus
 ``gallery/<Brand>.png``; the test scenes are the 50 query photos (brand known, no box) and the 20 no-logo photos.
-Gallery features are detected once per method (the cached gallery); the time per scene covers reading nothing but
-includes scene feature detection, matching and verification, measured per scene with the methods interleaved after
-a warm-up, and reported as medians.
+Gallery features are detected once per method (the cached gallery); the time per scene covers scene feature
+detection, matching and verification (not reading the file), measured per scene with the methods interleaved after a
+warm-up, and reported as medians.
 """
 
 from __future__ import annotations
@@ -145,6 +145,8 @@ def run_benchmark(root: Path, methods: list[str], fp: FeaturesParams, mp: LogoMa
 def run(args: argparse.Namespace) -> int:
     if not args.data:
         raise InputError("no data root: pass --data DIR or set CVPIPE_DATA")
+    if args.min_box < 1:
+        raise InputError(f"`--min-box` must be a positive number of pixels, got {args.min_box}")
     root = Path(args.data)
     if (root / SUBSET).is_dir():
         root = root / SUBSET
