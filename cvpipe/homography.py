@@ -38,6 +38,11 @@ from .errors import EstimationError, InputError
 DEFAULT_MAX_ITERS = 10_000
 #: smallest |twice the triangle area| of a sample triple in Hartley-normalized coordinates (mean radius sqrt(2))
 _COLLINEAR_EPS = 1e-5
+#: smallest |det(Hn)| / ||Hn||_F^3 of a model in Hartley-normalized coordinates (identity: 0.19; a mark covering a
+#: tenth of the scene's width: ~5e-3). Below it H nearly collapses the source onto a line or a point, where a
+#: cluster of many-to-one matches scores as exact "inliers" and wins the MSAC cost (seen with ORB on repetitive
+#: PCB texture: 24 source points matched to one scene point gave models at 3e-5 to 8e-5, and 1e-8)
+_MIN_CONDITION = 2e-4
 #: relative size of the smaller principal axis below which a whole point set counts as collinear (1e-7: the
 #: 2x2 covariance resolves eigenvalue ratios down to ~1e-15, i.e. axis ratios down to ~3e-8)
 _ALL_COLLINEAR_EPS = 1e-7
@@ -252,7 +257,7 @@ def dlt(src, dst, weights=None) -> np.ndarray:
 # ----------------------------------------------------------------------------------------------- numba core
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _sample4(u0, u1, u2, u3, n):
     """Four distinct indices in [0, n) from four uniforms in [0, 1): exact sampling without replacement.
 
@@ -283,13 +288,13 @@ def _sample4(u0, u1, u2, u3, n):
     return a, b, c, d
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _det3(ax, ay, bx, by, cx, cy):
     """det([a b c]) of homogeneous points (z = 1): twice the signed area of triangle abc."""
     return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _minimal_solve(sn, dn, i0, i1, i2, i3, H):
     """Homography (normalized coordinates) through four correspondences, or False for a degenerate sample.
 
@@ -354,14 +359,14 @@ def _minimal_solve(sn, dn, i0, i1, i2, i3, H):
     return True
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def _matmul3(A, B, out):
     for i in range(3):
         for j in range(3):
             out[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _msac(src, dst, H, thr2, bail):
     """(MSAC cost, inlier count) of H; stops early (count -1) once the cost exceeds ``bail``."""
     h0, h1, h2, h3, h4, h5, h6, h7, h8 = (H[0, 0], H[0, 1], H[0, 2], H[1, 0], H[1, 1], H[1, 2],
@@ -389,7 +394,7 @@ def _msac(src, dst, H, thr2, bail):
     return cost, cnt
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _sq_errors(src, dst, H, out):
     """Squared one-sided reprojection error per correspondence (inf when mapped to infinity)."""
     for i in range(src.shape[0]):
@@ -405,7 +410,7 @@ def _sq_errors(src, dst, H, out):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _similarity(s, tx, ty):
     """The 3x3 matrix [[s, 0, tx], [0, s, ty], [0, 0, 1]]."""
     T = np.zeros((3, 3))
@@ -417,7 +422,7 @@ def _similarity(s, tx, ty):
     return T
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _jacobi_eigh(M, V):
     """Eigen-decomposition of a small symmetric matrix by cyclic Jacobi rotations (M is overwritten).
 
@@ -475,7 +480,7 @@ def _jacobi_eigh(M, V):
     return ws
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _cholesky_solve(A, b, x):
     """Solve A x = b for a symmetric positive definite A (n x n) by Cholesky; False if A is not positive definite."""
     n = A.shape[0]
@@ -506,7 +511,7 @@ def _cholesky_solve(A, b, x):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _lm_cost(p, xs, ys, us, vs, ws):
     """Weighted sum of squared one-sided reprojection errors of the 8-parameter homography p (H[2, 2] = 1)."""
     c = 0.0
@@ -520,7 +525,7 @@ def _lm_cost(p, xs, ys, us, vs, ws):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _lsq(src, dst, mask):
     """Hartley-normalized DLT on the masked correspondences via the 9x9 normal matrix; (H, ok)."""
     H = np.zeros((3, 3))
@@ -604,7 +609,7 @@ def _lsq(src, dst, mask):
     return H, True
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _local_optimize(src, dst, H0, thr2, multiplier, steps, e2):
     """LO step: least squares on the inliers of H0, then iterative least squares while the threshold shrinks
     from ``multiplier * thr`` to ``thr``. Returns the best (H, MSAC cost, inliers) among H0 and the refits."""
@@ -641,7 +646,7 @@ def _local_optimize(src, dst, H0, thr2, multiplier, steps, e2):
     return best, best_cost, best_cnt
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _bound(inliers, n, log1mconf, max_iters, A):
     """RANSAC iterations needed to draw and accept one all-inlier 4-sample with the given confidence.
 
@@ -662,7 +667,7 @@ def _bound(inliers, n, log1mconf, max_iters, A):
     return max(1, int(math.ceil(k)))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _sprt_threshold(eps, delta, tm):
     """Decision threshold A of Wald's SPRT for RANSAC (Chum & Matas 2008, eq. 2), A = K + log A by iteration."""
     if not (0.0 < delta < eps < 1.0):
@@ -675,7 +680,7 @@ def _sprt_threshold(eps, delta, tm):
     return a
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _score(src, dst, H, thr2, bail, A, eps, delta):
     """Evaluate H point by point: (MSAC cost, inliers so far, points evaluated, status).
 
@@ -715,8 +720,21 @@ def _score(src, dst, H, thr2, bail, A, eps, delta):
     return cost, cnt, n, 0
 
 
-@njit(cache=True)
-def _ransac_chunk(src, dst, sn, dn, Ts, Tdi, u, thr2, log1mconf, max_iters, lo, lo_multiplier, lo_steps,
+@njit(cache=True, error_model="numpy")
+def _collapsed(Hn):
+    """True when the normalized model is nearly singular (see ``_MIN_CONDITION``)."""
+    det = (Hn[0, 0] * (Hn[1, 1] * Hn[2, 2] - Hn[1, 2] * Hn[2, 1])
+           - Hn[0, 1] * (Hn[1, 0] * Hn[2, 2] - Hn[1, 2] * Hn[2, 0])
+           + Hn[0, 2] * (Hn[1, 0] * Hn[2, 1] - Hn[1, 1] * Hn[2, 0]))
+    norm2 = 0.0
+    for i in range(3):
+        for j in range(3):
+            norm2 += Hn[i, j] * Hn[i, j]
+    return not abs(det) >= _MIN_CONDITION * norm2 ** 1.5
+
+
+@njit(cache=True, error_model="numpy")
+def _ransac_chunk(src, dst, sn, dn, Ts, Tdi, Tsi, Td, u, thr2, log1mconf, max_iters, lo, lo_multiplier, lo_steps,
                   best_H, state):
     """Run hypotheses from the uniforms ``u`` (K, 4) until the adaptive bound is met or ``u`` runs out.
 
@@ -733,7 +751,7 @@ def _ransac_chunk(src, dst, sn, dn, Ts, Tdi, u, thr2, log1mconf, max_iters, lo, 
             break
         used += 1
         i0, i1, i2, i3 = _sample4(u[k, 0], u[k, 1], u[k, 2], u[k, 3], n)
-        if not _minimal_solve(sn, dn, i0, i1, i2, i3, Hn):
+        if not _minimal_solve(sn, dn, i0, i1, i2, i3, Hn) or _collapsed(Hn):
             state[4] += 1
             continue
         state[3] += 1
@@ -758,7 +776,9 @@ def _ransac_chunk(src, dst, sn, dn, Ts, Tdi, u, thr2, log1mconf, max_iters, lo, 
         if lo and cnt >= 8:
             Hb, cost_b, cnt_b = _local_optimize(src, dst, H, thr2, lo_multiplier, lo_steps, e2)
             state[5] += 1
-            if cost_b < cost:
+            _matmul3(Hb, Tsi, tmp)
+            _matmul3(Td, tmp, Hn)
+            if cost_b < cost and not _collapsed(Hn):
                 H[:, :] = Hb
                 cost = cost_b
                 cnt = cnt_b
@@ -775,7 +795,7 @@ def _ransac_chunk(src, dst, sn, dn, Ts, Tdi, u, thr2, log1mconf, max_iters, lo, 
     return used
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _lm_refine(src, dst, weight, H0, max_iter):
     """Levenberg-Marquardt on the weighted one-sided reprojection error sum_i weight_i * |dehom(H src_i) - dst_i|^2.
 
@@ -917,7 +937,7 @@ def _lm_refine(src, dst, weight, H0, max_iter):
     return H, cost / (sd * sd)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _normalize(p):
     """Hartley normalization in one pass: (T (3, 3), normalized points (N, 2), not_collinear).
 
@@ -959,7 +979,7 @@ def _normalize(p):
     return T, out, det > (_ALL_COLLINEAR_EPS ** 2) * l1 * l1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _weights(e2, thr2, loss, out):
     """IRLS weights of the final refinement from squared residuals: 0 hard inliers (1 within the threshold),
     1 Tukey biweight (1 - e2 / c^2)^2 with c = threshold, 2 Cauchy-like 1 / (1 + e2 / s^2) (s = threshold / 2)
@@ -977,7 +997,7 @@ def _weights(e2, thr2, loss, out):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _msac_cost(e2, thr2):
     c = 0.0
     for i in range(e2.shape[0]):
@@ -985,7 +1005,7 @@ def _msac_cost(e2, thr2):
     return c
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _finalize(src, dst, H0, thr2, refine, rounds, loss, wthr2):
     """Inliers of H0 and, with ``refine``, up to ``rounds`` of weighted Levenberg-Marquardt (weights from the
     residuals of the previous round, see ``_weights``); with hard inliers (loss 0) a round is kept only if the MSAC
@@ -1113,6 +1133,7 @@ def find_homography(
                 "supply correspondences spread over a 2-D region"
             )
     Tdi = np.linalg.inv(Td)
+    Tsi = np.linalg.inv(Ts)
     best_H = np.zeros((3, 3))
     # best cost, best inliers, bound, iterations, degenerate samples, LO runs, SPRT eps, delta, A,
     # consistent points seen in bad models, points evaluated in bad models, bad models
@@ -1127,7 +1148,7 @@ def find_homography(
     while state[3] < state[2] and attempts < max_attempts:
         k = int(min(chunk, max_attempts - attempts))
         u = gen.random((k, 4))
-        attempts += _ransac_chunk(sp, dp, snp, dnp, Ts, Tdi, u, thr2, log1mconf, int(max_iters),
+        attempts += _ransac_chunk(sp, dp, snp, dnp, Ts, Tdi, Tsi, Td, u, thr2, log1mconf, int(max_iters),
                                   bool(local_optimization), float(lo_multiplier), int(lo_steps), best_H, state)
         chunk = min(chunk * 2, 8192)
     iterations = int(state[3])
@@ -1137,10 +1158,17 @@ def find_homography(
             "the correspondences are nearly collinear or inconsistent"
         )
     H, mask, e2 = _finalize(s, d, best_H, thr2, bool(refine), _FINAL_ROUNDS, _FINAL_LOSS, thr2 * _FINAL_WSCALE ** 2)
+    if refine and _collapsed(Td @ H @ Tsi):  # the refinement drifted to a degenerate model: keep RANSAC's
+        H, mask, e2 = _finalize(s, d, best_H, thr2, False, 0, _FINAL_LOSS, thr2)
     if mask.sum() < 4:
         raise EstimationError(
             f"no homography with at least 4 inliers within {threshold} px after {iterations} iterations; "
             "raise `threshold` or `max_iters`, or supply better matches"
+        )
+    if _collapsed(Td @ H @ Tsi):
+        raise EstimationError(
+            "the best homography is nearly singular (it collapses the image onto a line or a point): the matches "
+            "are dominated by many-to-one correspondences; use a cross check or a stricter ratio test"
         )
     H = _unit_h22(H)
     rms = float(np.sqrt(e2[mask].mean()))

@@ -380,3 +380,24 @@ def test_dlt_exact_on_four_points():
     dst = transform_points(H_TRUE, src)
     # 8 equations, 8 unknowns: exact up to rounding
     assert np.allclose(transform_points(dlt(src, dst), src), dst, atol=1e-8)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_many_to_one_cluster_does_not_win_with_a_collapsed_model(seed):
+    """Repetitive texture can match many source points to one destination point (seen with ORB on PCBs). A nearly
+    singular H maps them all onto that point with zero error and wins the MSAC cost unless collapsed models are
+    rejected; the true H must be found instead (3 px: the inliers carry 1 px noise)."""
+    from cvpipe.metrics import corner_error
+
+    rng = np.random.default_rng(seed)
+    H_true = np.array([[0.95, -0.04, 40.0], [0.08, 0.98, 35.0], [-4e-5, 1e-5, 1.0]])
+    good = rng.uniform(0, 600, (30, 2))
+    good_dst = transform_points(H_true, good) + rng.normal(0, 1.0, (30, 2))
+    line = np.c_[rng.uniform(50, 600, 24), np.full(24, 53.3)]  # collinear sources across the image ...
+    point = np.tile([[524.2, 47.5]], (24, 1))                   # ... all matched to one destination point
+    junk = rng.uniform(0, 600, (35, 2)), rng.uniform(0, 600, (35, 2))
+    src = np.r_[good, line, junk[0]]
+    dst = np.r_[good_dst, point, junk[1]]
+    fit = find_homography(src, dst, 3.0, rng=seed)
+    assert corner_error(fit.H, H_true, 640, 480) < 3.0
+    assert not fit.inliers[30:54].any()
