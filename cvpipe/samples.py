@@ -15,7 +15,7 @@ import numpy as np
 
 #: gallery brands (simple-icons slugs, CC0 marks with enough shape detail for local features)
 LOGO_BRANDS = ("starbucks", "raspberrypi", "linux", "redbull", "ferrari",
-               "porsche", "lamborghini", "cocacola", "python", "docker")
+               "porsche", "lamborghini", "cocacola", "unilever", "docker")
 #: marks pasted into the no-logo scenes as distractors: they are not in the gallery, so the answer stays "none"
 LOGO_DISTRACTORS = ("nasa", "bmw", "opencv", "reddit")
 #: scikit-image photos usable as backgrounds (all ship inside the wheel, no download)
