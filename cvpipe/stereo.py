@@ -1,0 +1,601 @@
+"""Disparity of a rectified stereo pair: our semi-global matching and the OpenCV baselines.
+
+Conventions (DESIGN.md): ``left`` and ``right`` are rectified, both (H, W) grayscale or both (H, W, 3) BGR uint8
+images as ``cv2.imread`` returns them. A left pixel (x, y) with disparity d matches the right pixel (x - d, y).
+``max_disp`` is like OpenCV's ``numDisparities``: the disparities searched are 0 .. max_disp - 1. Every method
+returns an (H, W) float32 disparity of the LEFT image in pixels, NaN where it has no (trusted) estimate.
+
+``disparity_sgm`` follows Hirschmueller's semi-global matching (PAMI 2008): a census (optionally plus truncated
+absolute-difference) matching cost, cost aggregation along 8 (or 4) scanline directions with penalties P1 / P2 where
+P2 shrinks across intensity edges, winner-take-all with a uniqueness test, a parabola through the aggregated costs for
+sub-pixel disparity, a left-right consistency check on the same cost volume and removal of small speckles.
+All per-pixel work runs in numba kernels (``cache=True``; ``parallel=True`` where scanlines are independent).
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import cv2
+import numpy as np
+from numba import njit, prange
+
+#: most bits a census signature can hold (uint64)
+_CENSUS_BITS = 64
+#: supported numbers of aggregation directions (4: horizontal and vertical; 8: also the diagonals)
+_PATHS = (4, 8)
+
+
+# ----------------------------------------------------------------------------------------------- validation
+
+
+def _check_pair(left: np.ndarray, right: np.ndarray, max_disp: int) -> None:
+    """Validate a stereo pair and the disparity range at the public boundary (ValueError naming the parameter)."""
+    for name, img in (("left", left), ("right", right)):
+        if not isinstance(img, np.ndarray):
+            raise ValueError(f"`{name}` must be a numpy array, got {type(img).__name__}")
+        if img.dtype != np.uint8:
+            raise ValueError(f"`{name}` must be uint8, got {img.dtype}")
+        if not (img.ndim == 2 or (img.ndim == 3 and img.shape[2] == 3)):
+            raise ValueError(f"`{name}` must be (H, W) gray or (H, W, 3) BGR, got shape {img.shape}")
+    if left.ndim != right.ndim:
+        kinds = {2: "grayscale", 3: "BGR"}
+        raise ValueError(
+            f"`left` and `right` must both be grayscale or both BGR, got {kinds[left.ndim]} and {kinds[right.ndim]}"
+        )
+    if left.shape[:2] != right.shape[:2]:
+        raise ValueError(
+            f"`left` and `right` must have the same size, got {left.shape[1]}x{left.shape[0]} and "
+            f"{right.shape[1]}x{right.shape[0]}"
+        )
+    if isinstance(max_disp, (bool, np.bool_)) or not isinstance(max_disp, (int, np.integer)):
+        raise ValueError(f"`max_disp` must be an integer, got {max_disp!r}")
+    width = left.shape[1]
+    if max_disp <= 0 or max_disp >= width:
+        raise ValueError(f"`max_disp` must be in [1, {width - 1}] (positive and less than the image width), "
+                         f"got {max_disp}")
+
+
+def _gray(img: np.ndarray) -> np.ndarray:
+    return img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+
+
+# ----------------------------------------------------------------------------------------------- numba kernels
+
+
+#: "infinite" path cost in the int16 path buffers; real path costs stay below 8192 (checked in disparity_sgm), so
+#: _BIG + P1 cannot overflow int16 and _BIG never wins a minimum
+_BIG = 16000
+
+
+@njit(cache=True, parallel=True)
+def _census(padded, ry, rx):  # pragma: no cover - compiled
+    """Census signature per pixel of an image padded by (ry, rx): bit set where the neighbour is darker than the
+    centre, neighbours in row-major order without the centre."""
+    h = padded.shape[0] - 2 * ry
+    w = padded.shape[1] - 2 * rx
+    out = np.zeros((h, w), np.uint64)
+    for y in prange(h):
+        row = out[y]
+        centre = padded[y + ry, rx:rx + w]
+        for dy in range(2 * ry + 1):
+            for dx in range(2 * rx + 1):
+                if dy == ry and dx == rx:
+                    continue
+                nb = padded[y + dy, dx:dx + w]
+                for x in range(w):
+                    row[x] = (row[x] << np.uint64(1)) | np.uint64(nb[x] < centre[x])
+    return out
+
+
+@njit(cache=True, inline="always")
+def _popcount(v):  # pragma: no cover - compiled
+    v = v - ((v >> np.uint64(1)) & np.uint64(0x5555555555555555))
+    v = (v & np.uint64(0x3333333333333333)) + ((v >> np.uint64(2)) & np.uint64(0x3333333333333333))
+    v = (v + (v >> np.uint64(4))) & np.uint64(0x0F0F0F0F0F0F0F0F)
+    return (v * np.uint64(0x0101010101010101)) >> np.uint64(56)
+
+
+@njit(cache=True, parallel=True)
+def _cost_volume(cen_l, cen_r, img_l, img_r, max_disp, ad_lut, use_ad, invalid_cost):  # pragma: no cover
+    """(H, W, D) uint16 matching cost: census Hamming distance (+ ad_lut[mean absolute colour difference])."""
+    h, w = cen_l.shape
+    nch = img_l.shape[2]
+    cost = np.empty((h, w, max_disp), np.uint16)
+    for y in prange(h):
+        cr = cen_r[y]
+        for x in range(w):
+            cl = cen_l[y, x]
+            out = cost[y, x]
+            nd = min(max_disp, x + 1)
+            for d in range(nd):
+                out[d] = np.uint16(_popcount(cl ^ cr[x - d]))
+            for d in range(nd, max_disp):
+                out[d] = invalid_cost
+            if use_ad:
+                for d in range(nd):
+                    ad = 0
+                    for c in range(nch):
+                        ad += abs(np.int32(img_l[y, x, c]) - np.int32(img_r[y, x - d, c]))
+                    out[d] += ad_lut[ad // nch]
+    return cost
+
+
+@njit(cache=True, inline="always")
+def _path_start(cost_px, cur, acc_px):  # pragma: no cover - compiled
+    """First pixel of a path: L_r = C; returns min_d L_r."""
+    m = np.int16(_BIG)
+    for d in range(cost_px.shape[0]):
+        v = np.int16(cost_px[d])
+        cur[d + 1] = v
+        acc_px[d] += np.uint16(v)
+        m = min(m, v)
+    return m
+
+
+@njit(cache=True, inline="always")
+def _path_step(prev, mprev, cost_px, p1, p2e, cur, acc_px):  # pragma: no cover - compiled
+    """One SGM recursion step; ``prev``/``cur`` (int16) hold L_r at indices 1..D with _BIG at 0 and D + 1.
+
+    L_r(p, d) = C(p, d) + min(L_r(p-r, d), L_r(p-r, d+-1) + P1, min_k L_r(p-r, k) + P2') - min_k L_r(p-r, k).
+    Returns min_d L_r(p, d). Every intermediate is cast back to int16 so that LLVM vectorizes the loops 16 or 32
+    lanes wide (the first loop has no reduction, the second no dependency on the padded neighbours).
+    """
+    jump = np.int16(mprev + p2e)
+    nd = cost_px.shape[0]
+    for d in range(nd):
+        v = np.int16(min(np.int16(min(prev[d], prev[d + 2]) + p1), prev[d + 1]))
+        cur[d + 1] = np.int16(np.int16(cost_px[d]) + np.int16(min(v, jump)) - mprev)
+    m = np.int16(_BIG)
+    for d in range(nd):
+        v = cur[d + 1]
+        acc_px[d] += np.uint16(v)
+        m = min(m, v)
+    return m
+
+
+@njit(cache=True, parallel=True)
+def _aggregate_horizontal(cost, gray, p1, p2_lut, acc):  # pragma: no cover - compiled
+    """Add the left-to-right and right-to-left path costs to ``acc``; rows run in parallel.
+
+    ``p2_lut[|I(p) - I(p-r)|]`` is the edge-adapted P2 (int16, indexed by the grey-level step)."""
+    h, w, nd = cost.shape
+    for y in prange(h):
+        a = np.full(nd + 2, _BIG, np.int16)
+        b = np.full(nd + 2, _BIG, np.int16)
+        for direction in (1, -1):
+            x = 0 if direction == 1 else w - 1
+            m = _path_start(cost[y, x], a, acc[y, x])
+            for _ in range(w - 1):
+                px = x
+                x += direction
+                p2e = p2_lut[abs(np.int32(gray[y, x]) - np.int32(gray[y, px]))]
+                m = _path_step(a, m, cost[y, x], p1, p2e, b, acc[y, x])
+                a, b = b, a
+
+
+@njit(cache=True, parallel=True)
+def _aggregate_lines(cost, gray, dy, dx, blocks, p1, p2_lut, acc):  # pragma: no cover - compiled
+    """Add the path costs of direction (dy, dx), dy = +-1, to ``acc``.
+
+    The paths are the lines x - dx * s = k, where s counts rows in sweep order. Each (k0, k1) in ``blocks`` is a
+    group of adjacent lines that one thread sweeps together, so that it reads adjacent pixels of each row (cache
+    friendly) while the groups run in parallel without sharing any pixel.
+    """
+    h, w, nd = cost.shape
+    for b in prange(blocks.shape[0]):
+        k0 = blocks[b, 0]
+        g = blocks[b, 1] - k0
+        bufs = np.full((2, g, nd + 2), _BIG, np.int16)
+        mins = np.empty((2, g), np.int16)
+        for s in range(h):
+            y = s if dy > 0 else h - 1 - s
+            cur = s % 2
+            prev = 1 - cur
+            for i in range(g):
+                x = k0 + i + dx * s
+                if x < 0 or x >= w:
+                    continue
+                px = x - dx
+                if s == 0 or px < 0 or px >= w:
+                    mins[cur, i] = _path_start(cost[y, x], bufs[cur, i], acc[y, x])
+                else:
+                    p2e = p2_lut[abs(np.int32(gray[y, x]) - np.int32(gray[y - dy, px]))]
+                    mins[cur, i] = _path_step(bufs[prev, i], mins[prev, i], cost[y, x], p1, p2e, bufs[cur, i],
+                                              acc[y, x])
+
+
+def _line_blocks(h: int, w: int, dx: int, size: int = 32) -> np.ndarray:
+    """(N, 2) int64 ranges [k0, k1) of the line index k = x - dx * s of direction dx, in groups of ``size``."""
+    lo = -(h - 1) if dx > 0 else 0
+    hi = w if dx >= 0 else w + h - 1
+    k0 = np.arange(lo, hi, size, dtype=np.int64)
+    return np.stack([k0, np.minimum(k0 + size, hi)], axis=1)
+
+
+@njit(cache=True, parallel=True)
+def _winner(acc, uniqueness, subpixel):  # pragma: no cover - compiled
+    """Winner-take-all disparity of the left image (float32, -1 = rejected) and of the right image (int32).
+
+    The right image's disparity reuses the volume: D_R(xr) = argmin_d S(xr + d, d). A left pixel is rejected when a
+    disparity more than one step from the winner costs less than (1 + uniqueness) times the winner's cost.
+    The loops are written as a min reduction, a search and a select so that LLVM vectorizes them.
+    """
+    h, w, nd = acc.shape
+    disp = np.empty((h, w), np.float32)
+    disp_r = np.zeros((h, w), np.int32)
+    for y in prange(h):
+        best_r = np.full(w, 65535, np.uint16)
+        arg_r = np.zeros(w, np.int32)
+        for x in range(w):
+            s = acc[y, x]
+            n = min(nd, x + 1)
+            best = np.uint16(65535)
+            for d in range(n):
+                best = min(best, s[d])
+            bd = 0
+            while s[bd] != best:
+                bd += 1
+            for d in range(n):
+                v = s[d]
+                j = x - d
+                better = v < best_r[j]
+                best_r[j] = v if better else best_r[j]
+                arg_r[j] = d if better else arg_r[j]
+            if uniqueness > 0:
+                limit = best * (1.0 + uniqueness)
+                rejected = False
+                for d in range(n):
+                    if (d < bd - 1 or d > bd + 1) and s[d] < limit:
+                        rejected = True
+                if rejected:
+                    disp[y, x] = -1.0
+                    continue
+            dv = np.float32(bd)
+            if subpixel and 0 < bd < n - 1:
+                cm = np.float64(s[bd - 1])
+                cp = np.float64(s[bd + 1])
+                den = cm - 2.0 * best + cp
+                if den > 0:
+                    dv = np.float32(bd + 0.5 * (cm - cp) / den)
+            disp[y, x] = dv
+        disp_r[y] = arg_r
+    return disp, disp_r
+
+
+@njit(cache=True, parallel=True)
+def _lr_check(disp, disp_r, max_diff):  # pragma: no cover - compiled
+    """Reject (set to -1) left disparities that the right image's disparity does not confirm within ``max_diff``.
+
+    Both integer neighbours of the sub-pixel disparity d are tried (floor and ceil, each compared with the right
+    image's disparity at x minus itself); the pixel is kept when either agrees, so sub-pixel refinement does not
+    count against the check.
+    """
+    h, w = disp.shape
+    for y in prange(h):
+        for x in range(w):
+            d = disp[y, x]
+            if d < 0:
+                continue
+            lo = int(d)
+            hi = lo + 1 if d > lo else lo
+            ok_lo = x - lo >= 0 and abs(lo - disp_r[y, x - lo]) <= max_diff
+            ok_hi = x - hi >= 0 and abs(hi - disp_r[y, x - hi]) <= max_diff
+            if not (ok_lo or ok_hi):
+                disp[y, x] = -1.0
+
+
+@njit(cache=True)
+def _remove_speckles(disp, max_size, max_jump):  # pragma: no cover - compiled
+    """Reject 4-connected regions (neighbours within ``max_jump`` px of each other) smaller than ``max_size`` px."""
+    h, w = disp.shape
+    label = np.zeros((h, w), np.int32)
+    stack = np.empty(h * w, np.int64)
+    members = np.empty(h * w, np.int64)
+    n_label = 0
+    for y0 in range(h):
+        for x0 in range(w):
+            if label[y0, x0] != 0 or disp[y0, x0] < 0:
+                continue
+            n_label += 1
+            label[y0, x0] = n_label
+            top = 0
+            stack[top] = y0 * w + x0
+            top = 1
+            count = 0
+            while top > 0:
+                top -= 1
+                i = stack[top]
+                members[count] = i
+                count += 1
+                y = i // w
+                x = i - y * w
+                dv = disp[y, x]
+                for k in range(4):
+                    yy = y + (1 if k == 0 else (-1 if k == 1 else 0))
+                    xx = x + (1 if k == 2 else (-1 if k == 3 else 0))
+                    if 0 <= yy < h and 0 <= xx < w and label[yy, xx] == 0:
+                        dn = disp[yy, xx]
+                        if dn >= 0 and abs(dn - dv) <= max_jump:
+                            label[yy, xx] = n_label
+                            stack[top] = yy * w + xx
+                            top += 1
+            if count < max_size:
+                for j in range(count):
+                    i = members[j]
+                    disp[i // w, i - (i // w) * w] = -1.0
+
+
+@njit(cache=True, parallel=True)
+def _fill_background(disp):  # pragma: no cover - compiled
+    """Fill rejected pixels from the nearest accepted pixels left and right on the row, taking the smaller (farther,
+    background) disparity, as occlusions belong to the background (Hirschmueller 2008, section 3.4)."""
+    h, w = disp.shape
+    out = disp.copy()
+    for y in prange(h):
+        for x in range(w):
+            if disp[y, x] >= 0:
+                continue
+            left = np.float32(-1.0)
+            for xx in range(x - 1, -1, -1):
+                if disp[y, xx] >= 0:
+                    left = disp[y, xx]
+                    break
+            right = np.float32(-1.0)
+            for xx in range(x + 1, w):
+                if disp[y, xx] >= 0:
+                    right = disp[y, xx]
+                    break
+            if left >= 0 and right >= 0:
+                out[y, x] = min(left, right)
+            elif left >= 0:
+                out[y, x] = left
+            elif right >= 0:
+                out[y, x] = right
+    return out
+
+
+# ----------------------------------------------------------------------------------------------- public API
+
+
+def disparity_sgm(
+    left: np.ndarray,
+    right: np.ndarray,
+    max_disp: int,
+    *,
+    census_size: tuple[int, int] = (5, 7),
+    ad_weight: float = 0.5,
+    ad_trunc: int = 20,
+    paths: int = 8,
+    p1: int = 10,
+    p2: int = 120,
+    p2_tau: float = 16.0,
+    uniqueness: float = 0.0,
+    subpixel: bool = True,
+    lr_max_diff: float = 1.0,
+    speckle_size: int = 100,
+    speckle_range: float = 2.0,
+    fill: bool = False,
+) -> np.ndarray:
+    """Disparity of the left image by semi-global matching on a census cost.
+
+    Parameters
+    ----------
+    left, right : ndarray, (H, W) or (H, W, 3) uint8
+        Rectified pair, both grayscale or both BGR; a left pixel (x, y) with disparity d matches right (x - d, y).
+    max_disp : int
+        Number of disparities searched, 0 .. max_disp - 1 (like OpenCV's ``numDisparities``); in [1, W - 1].
+    census_size : (int, int)
+        Odd (height, width) of the census window; at most 65 pixels so that a signature fits 64 bits.
+    ad_weight : float
+        Weight of the truncated mean absolute colour difference added to the census Hamming distance (0 = census
+        only). The cost of one disparity is ``hamming + round(ad_weight * min(AD, ad_trunc))``.
+    ad_trunc : int
+        Grey levels at which the absolute difference saturates, in [1, 255].
+    paths : {8, 4}
+        Number of aggregation directions; 4 (horizontal and vertical only) is about twice as fast.
+    p1, p2 : int
+        Penalties, in cost units (Hamming bits), for a disparity change of one pixel and of more than one pixel
+        between neighbours on a path; ``1 <= p1 < p2``.
+    p2_tau : float
+        Grey-level scale of the edge adaptation ``P2' = max(P2 * tau / (tau + |dI|), P1 + 1)``; 0 keeps P2 fixed.
+    uniqueness : float
+        Reject a pixel when another disparity (not adjacent to the winner) costs less than ``(1 + uniqueness)``
+        times the winner's aggregated cost; 0 disables the test.
+    subpixel : bool
+        Refine the winner with a parabola through the aggregated costs at d - 1, d, d + 1.
+    lr_max_diff : float
+        Largest accepted difference, in pixels, between the left disparity and the right image's disparity at
+        the matched pixel; negative disables the left-right check.
+    speckle_size : int
+        Connected regions with fewer pixels than this are rejected (0 disables speckle removal).
+    speckle_range : float
+        Largest disparity step, in pixels, between 4-neighbours of one region.
+    fill : bool
+        Fill rejected pixels with the smaller (background) of the nearest accepted disparities on the same row.
+        Off by default: the map then has NaN wherever the estimate is not trusted.
+
+    Returns
+    -------
+    ndarray, (H, W) float32
+        Disparity of the left image in pixels, NaN where rejected (occluded, ambiguous, inconsistent, speckle, or
+        ``x < d`` for every candidate).
+
+    Raises
+    ------
+    ValueError
+        Bad images (different sizes, gray mixed with colour, not uint8) or a parameter out of range.
+    """
+    _check_pair(left, right, max_disp)
+    if len(census_size) != 2 or any(int(s) != s or s < 1 or s % 2 == 0 for s in census_size):
+        raise ValueError(f"`census_size` must be two odd positive integers (height, width), got {census_size}")
+    if census_size[0] * census_size[1] - 1 > _CENSUS_BITS:
+        raise ValueError(f"`census_size` must cover at most {_CENSUS_BITS + 1} pixels, got {census_size}")
+    if not ad_weight >= 0:
+        raise ValueError(f"`ad_weight` must be >= 0, got {ad_weight}")
+    if not 1 <= ad_trunc <= 255:
+        raise ValueError(f"`ad_trunc` must be in [1, 255], got {ad_trunc}")
+    if paths not in _PATHS:
+        raise ValueError(f"`paths` must be one of {sorted(_PATHS)}, got {paths!r}")
+    if not 1 <= p1 < p2:
+        raise ValueError(f"`p1` and `p2` must satisfy 1 <= p1 < p2, got p1={p1}, p2={p2}")
+    if p2 > 4096:
+        raise ValueError(f"`p2` must be at most 4096, got {p2}")
+    if not p2_tau >= 0:
+        raise ValueError(f"`p2_tau` must be >= 0, got {p2_tau}")
+    if not 0 <= uniqueness < 1:
+        raise ValueError(f"`uniqueness` must be in [0, 1), got {uniqueness}")
+    if speckle_size < 0:
+        raise ValueError(f"`speckle_size` must be >= 0, got {speckle_size}")
+    if not speckle_range >= 0:
+        raise ValueError(f"`speckle_range` must be >= 0, got {speckle_range}")
+
+    gl, gr = _gray(left), _gray(right)
+    cl = left.reshape(left.shape[0], left.shape[1], -1)
+    cr = right.reshape(right.shape[0], right.shape[1], -1)
+    ry, rx = census_size[0] // 2, census_size[1] // 2
+    ad_lut = np.round(ad_weight * np.minimum(np.arange(256), ad_trunc)).astype(np.int32)
+    c_max = _CENSUS_BITS + int(ad_lut[-1])
+    # every path cost is at most c_max + p2, so the sum over all paths must fit uint16
+    if c_max + p2 >= 8192:
+        raise ValueError(f"`ad_weight` * `ad_trunc` + `p2` too large: path costs would overflow "
+                         f"(64 + {c_max - 64} + {p2} >= 8192)")
+    gl_pad = np.pad(gl, ((ry, ry), (rx, rx)), mode="edge")
+    gr_pad = np.pad(gr, ((ry, ry), (rx, rx)), mode="edge")
+    cost = _cost_volume(_census(gl_pad, ry, rx), _census(gr_pad, ry, rx), cl, cr, int(max_disp),
+                        ad_lut, bool(ad_weight > 0), np.uint16(c_max))
+    acc = np.zeros_like(cost)
+    steps = np.arange(256, dtype=np.float64)
+    p2_lut = np.full(256, p2, np.float64) if p2_tau == 0 else np.floor(p2 * p2_tau / (p2_tau + steps))
+    p2_lut = np.maximum(p2_lut, p1 + 1).astype(np.int16)
+    args = (np.int16(p1), p2_lut, acc)
+    _aggregate_horizontal(cost, gl, *args)
+    h, w = gl.shape
+    for dy in (1, -1):
+        for dx in (-1, 0, 1) if paths == 8 else (0,):
+            _aggregate_lines(cost, gl, dy, dx, _line_blocks(h, w, dx), *args)
+    del cost
+    disp, disp_r = _winner(acc, float(uniqueness), bool(subpixel))
+    del acc
+    if lr_max_diff >= 0:
+        _lr_check(disp, disp_r, float(lr_max_diff))
+    if speckle_size > 0:
+        _remove_speckles(disp, int(speckle_size), float(speckle_range))
+    if fill:
+        disp = _fill_background(disp)
+    disp[disp < 0] = np.nan
+    return disp
+
+
+# ----------------------------------------------------------------------------------------------- OpenCV baselines
+
+#: OpenCV StereoSGBM modes by name
+SGBM_MODES = {
+    "sgbm": cv2.StereoSGBM_MODE_SGBM,
+    "hh": cv2.StereoSGBM_MODE_HH,
+    "sgbm_3way": cv2.StereoSGBM_MODE_SGBM_3WAY,
+    "hh4": cv2.StereoSGBM_MODE_HH4,
+}
+
+
+def _from_fixed_point(raw: np.ndarray) -> np.ndarray:
+    """OpenCV's int16 disparity (x16, negative = invalid when minDisparity = 0) -> float32 pixels with NaN."""
+    disp = raw.astype(np.float32) / float(cv2.StereoMatcher_DISP_SCALE)
+    disp[raw < 0] = np.nan
+    return disp
+
+
+def _opencv_num_disp(max_disp: int, width: int) -> int:
+    """numDisparities rounded up to OpenCV's required multiple of 16, kept below the width."""
+    n = -(-int(max_disp) // 16) * 16
+    if n >= width:
+        raise ValueError(f"`max_disp` rounded up to a multiple of 16 ({n}) must be less than the width {width} "
+                         "for the OpenCV matchers")
+    return n
+
+
+def disparity_opencv_bm(left: np.ndarray, right: np.ndarray, max_disp: int, *, block_size: int = 15,
+                        uniqueness: int = 15, speckle_size: int = 100, speckle_range: int = 2) -> np.ndarray:
+    """OpenCV block matching (``cv2.StereoBM``) on grayscale, returned like :func:`disparity_sgm`.
+
+    Parameters
+    ----------
+    left, right, max_disp
+        As for :func:`disparity_sgm`; ``max_disp`` is rounded up to a multiple of 16 as OpenCV requires.
+    block_size : int
+        Odd SAD window side in [5, 255].
+    uniqueness : int
+        OpenCV ``uniquenessRatio`` in percent.
+    speckle_size, speckle_range : int
+        OpenCV ``speckleWindowSize`` and ``speckleRange`` (pixels).
+
+    Returns
+    -------
+    ndarray, (H, W) float32
+        Disparity of the left image in pixels, NaN where OpenCV marks it invalid.
+    """
+    _check_pair(left, right, max_disp)
+    if block_size % 2 == 0 or not 5 <= block_size <= 255:
+        raise ValueError(f"`block_size` must be odd and in [5, 255], got {block_size}")
+    bm = cv2.StereoBM_create(numDisparities=_opencv_num_disp(max_disp, left.shape[1]), blockSize=int(block_size))
+    bm.setUniquenessRatio(int(uniqueness))
+    bm.setSpeckleWindowSize(int(speckle_size))
+    bm.setSpeckleRange(int(speckle_range) * 16)
+    disp = _from_fixed_point(bm.compute(_gray(left), _gray(right)))
+    disp[disp >= max_disp] = np.nan
+    return disp
+
+
+def disparity_opencv_sgbm(left: np.ndarray, right: np.ndarray, max_disp: int, *, mode: str = "sgbm",
+                          block_size: int = 5, uniqueness: int = 10, speckle_size: int = 100,
+                          speckle_range: int = 2, lr_max_diff: int = 1) -> np.ndarray:
+    """OpenCV semi-global block matching (``cv2.StereoSGBM``), returned like :func:`disparity_sgm`.
+
+    Parameters
+    ----------
+    left, right, max_disp
+        As for :func:`disparity_sgm`; ``max_disp`` is rounded up to a multiple of 16 as OpenCV requires.
+    mode : {"sgbm", "hh", "sgbm_3way", "hh4"}
+        OpenCV mode: 5 directions in one pass, the full 8-direction algorithm, 3-way parallel, or 4 directions.
+    block_size : int
+        Odd matching block side in [1, 11]; P1 = 8 * channels * block_size**2 and P2 = 32 * channels *
+        block_size**2 as OpenCV's documentation recommends.
+    uniqueness, speckle_size, speckle_range, lr_max_diff : int
+        OpenCV ``uniquenessRatio`` (percent), ``speckleWindowSize``, ``speckleRange`` (pixels), ``disp12MaxDiff``.
+
+    Returns
+    -------
+    ndarray, (H, W) float32
+        Disparity of the left image in pixels, NaN where OpenCV marks it invalid.
+    """
+    _check_pair(left, right, max_disp)
+    if mode not in SGBM_MODES:
+        raise ValueError(f"`mode` must be one of {sorted(SGBM_MODES)}, got {mode!r}")
+    if block_size % 2 == 0 or not 1 <= block_size <= 11:
+        raise ValueError(f"`block_size` must be odd and in [1, 11], got {block_size}")
+    cn = 1 if left.ndim == 2 else 3
+    sgbm = cv2.StereoSGBM_create(
+        minDisparity=0, numDisparities=_opencv_num_disp(max_disp, left.shape[1]), blockSize=int(block_size),
+        P1=8 * cn * block_size**2, P2=32 * cn * block_size**2, disp12MaxDiff=int(lr_max_diff),
+        uniquenessRatio=int(uniqueness), speckleWindowSize=int(speckle_size), speckleRange=int(speckle_range),
+        mode=SGBM_MODES[mode],
+    )
+    disp = _from_fixed_point(sgbm.compute(left, right))
+    disp[disp >= max_disp] = np.nan
+    return disp
+
+
+#: method name -> function(left, right, max_disp, **options) -> (H, W) float32 disparity with NaN
+METHODS: dict[str, Callable[..., np.ndarray]] = {
+    "sgm": disparity_sgm,
+    "opencv_bm": disparity_opencv_bm,
+    "opencv_sgbm": disparity_opencv_sgbm,
+}
+
+
+def compute_disparity(left: np.ndarray, right: np.ndarray, max_disp: int, method: str = "sgm",
+                      **options) -> np.ndarray:
+    """Disparity of the left image with the registered ``method`` (see :data:`METHODS`); options go to it."""
+    if method not in METHODS:
+        raise ValueError(f"`method` must be one of {sorted(METHODS)}, got {method!r}")
+    return METHODS[method](left, right, max_disp, **options)
