@@ -11,7 +11,7 @@ import json
 import os
 import tempfile
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterable, Iterator, TypeVar
 
 import cv2
 import numpy as np
@@ -225,3 +225,16 @@ def load_json(path: str | os.PathLike) -> Any:
         return json.loads(p.read_text(encoding="utf-8"))
     except json.JSONDecodeError as exc:
         raise InputError(f"{p}: not valid JSON ({exc})") from exc
+
+
+T = TypeVar("T")
+
+
+def progress(iterable: Iterable[T], desc: str, total: int | None = None) -> Iterable[T]:
+    """``iterable`` with a tqdm progress bar on stderr, shown only when stderr is a terminal (quiet under DVC/CI).
+
+    Used by every per-image loop of the stages and benchmarks, so they all behave the same way.
+    """
+    from tqdm import tqdm
+
+    return tqdm(iterable, desc=desc, total=total, disable=None, dynamic_ncols=True)

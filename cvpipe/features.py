@@ -1,0 +1,163 @@
+"""Keypoint detectors and descriptors behind one registry.
+
+``DETECTORS`` maps a name to a factory; BRISK and AKAZE are reached through :func:`opencv_factory`, which finds
+them in the main ``cv2`` namespace (OpenCV 4.x, and 5.x contrib builds) or in ``cv2.xfeatures2d`` (5.x, where they
+moved to the contrib modules).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import cv2
+import numpy as np
+
+from .errors import InputError
+
+
+def opencv_factory(name: str) -> Callable[..., cv2.Feature2D]:
+    """The ``cv2`` constructor ``<name>_create`` wherever this OpenCV build keeps it.
+
+    Parameters
+    ----------
+    name : str
+        OpenCV class name, e.g. ``"BRISK"`` or ``"AKAZE"``.
+
+    Raises
+    ------
+    ImportError
+        When neither ``cv2`` nor ``cv2.xfeatures2d`` has it: install ``opencv-contrib-python-headless``.
+    """
+    for namespace in (cv2, getattr(cv2, "xfeatures2d", None), getattr(cv2, "features2d", None)):
+        if namespace is not None and hasattr(namespace, f"{name}_create"):
+            return getattr(namespace, f"{name}_create")
+    raise ImportError(
+        f"this OpenCV build ({cv2.__version__}) has no {name}; install opencv-contrib-python-headless"
+    )
+
+
+def _sift(max_features: int) -> cv2.Feature2D:
+    return cv2.SIFT_create(nfeatures=max_features)
+
+
+def _orb(max_features: int) -> cv2.Feature2D:
+    return cv2.ORB_create(nfeatures=max_features, scaleFactor=1.2, nlevels=8, fastThreshold=10)
+
+
+def _brisk(max_features: int) -> cv2.Feature2D:
+    return opencv_factory("BRISK")(thresh=20)
+
+
+def _akaze(max_features: int) -> cv2.Feature2D:
+    return opencv_factory("AKAZE")(threshold=0.0005)
+
+
+#: detector name -> (factory(max_features), descriptors are binary)
+DETECTORS: dict[str, tuple[Callable[[int], cv2.Feature2D], bool]] = {
+    "sift": (_sift, False),
+    "orb": (_orb, True),
+    "brisk": (_brisk, True),
+    "akaze": (_akaze, True),
+}
+
+
+@dataclass(frozen=True)
+class Features:
+    """Keypoints and descriptors of one image.
+
+    Attributes
+    ----------
+    xy : (N, 2) float32
+        Keypoint positions, x = column, y = row, in pixels.
+    size : (N,) float32
+        Keypoint diameter in pixels.
+    angle : (N,) float32
+        Orientation in degrees (-1 when the detector has none).
+    response : (N,) float32
+        Detector response (strength).
+    descriptors : (N, D) float32 or uint8
+        One row per keypoint; uint8 rows are packed bits for the binary detectors.
+    detector : str
+        Registry name of the detector that produced them.
+    """
+
+    xy: np.ndarray
+    size: np.ndarray
+    angle: np.ndarray
+    response: np.ndarray
+    descriptors: np.ndarray
+    detector: str
+
+    def __len__(self) -> int:
+        return len(self.xy)
+
+    @property
+    def binary(self) -> bool:
+        return DETECTORS[self.detector][1]
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """Named arrays for ``io.save_npz``."""
+        return {
+            "xy": self.xy, "size": self.size, "angle": self.angle, "response": self.response,
+            "descriptors": self.descriptors, "detector": np.array(self.detector),
+        }
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray]) -> "Features":
+        """Inverse of :meth:`to_arrays`."""
+        detector = str(arrays["detector"])
+        check_detector(detector)
+        return cls(arrays["xy"], arrays["size"], arrays["angle"], arrays["response"], arrays["descriptors"], detector)
+
+
+def check_detector(detector: str) -> None:
+    """Raise ``ValueError`` listing the choices when ``detector`` is not registered."""
+    if detector not in DETECTORS:
+        raise ValueError(f"`detector` must be one of {sorted(DETECTORS)}, got {detector!r}")
+
+
+def empty_descriptors(detector: str) -> np.ndarray:
+    """A (0, D) descriptor array of the right dtype for ``detector``."""
+    return np.zeros((0, 32), np.uint8) if DETECTORS[detector][1] else np.zeros((0, 128), np.float32)
+
+
+def detect(gray: np.ndarray, detector: str = "sift", max_features: int = 4000,
+           mask: np.ndarray | None = None) -> Features:
+    """Detect keypoints and compute descriptors.
+
+    Parameters
+    ----------
+    gray : (H, W) uint8
+        Grayscale image.
+    detector : {"sift", "orb", "brisk", "akaze"}
+        Registry name.
+    max_features : int
+        Keep at most this many keypoints, the strongest by response.
+    mask : (H, W) uint8, optional
+        Detect only where non-zero.
+
+    Returns
+    -------
+    Features
+        Possibly empty (a blank image has no features); callers decide whether that is an error.
+    """
+    check_detector(detector)
+    gray = np.asarray(gray)
+    if gray.ndim != 2 or gray.dtype != np.uint8:
+        raise ValueError(f"`gray` must be a (H, W) uint8 image, got shape {gray.shape} dtype {gray.dtype}")
+    if gray.size == 0:
+        raise InputError("`gray` is empty (0 pixels)")
+    if not isinstance(max_features, (int, np.integer)) or max_features <= 0:
+        raise ValueError(f"`max_features` must be a positive integer, got {max_features!r}")
+    factory, _ = DETECTORS[detector]
+    keypoints, desc = factory(int(max_features)).detectAndCompute(gray, mask)
+    if desc is None or not keypoints:
+        z = np.zeros(0, np.float32)
+        return Features(np.zeros((0, 2), np.float32), z, z, z, empty_descriptors(detector), detector)
+    response = np.array([k.response for k in keypoints], np.float32)
+    order = np.argsort(-response, kind="stable")[:max_features]
+    xy = np.array([k.pt for k in keypoints], np.float32)[order]
+    size = np.array([k.size for k in keypoints], np.float32)[order]
+    angle = np.array([k.angle for k in keypoints], np.float32)[order]
+    return Features(xy, size, angle, response[order], np.ascontiguousarray(desc[order]), detector)

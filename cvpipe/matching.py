@@ -1,0 +1,73 @@
+"""Descriptor matching: FLANN (KD-tree) for float descriptors, Hamming brute force for binary ones, Lowe's ratio
+test and an optional mutual (cross) check."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+_FLANN_KDTREE = 1
+
+
+def _knn(query: np.ndarray, train: np.ndarray, binary: bool, k: int) -> list:
+    if binary:
+        return cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(query, train, k=k)
+    if len(train) < 32:
+        return cv2.BFMatcher(cv2.NORM_L2).knnMatch(query, train, k=k)
+    flann = cv2.FlannBasedMatcher({"algorithm": _FLANN_KDTREE, "trees": 4}, {"checks": 64})
+    return flann.knnMatch(np.ascontiguousarray(query, np.float32), np.ascontiguousarray(train, np.float32), k=k)
+
+
+def _ratio_pairs(knn: list, ratio: float) -> tuple[np.ndarray, np.ndarray]:
+    """(query index, train index) pairs and distances that pass the ratio test."""
+    pairs, dists = [], []
+    for m in knn:
+        if len(m) == 0:
+            continue
+        if len(m) == 1 or m[0].distance < ratio * m[1].distance:
+            pairs.append((m[0].queryIdx, m[0].trainIdx))
+            dists.append(m[0].distance)
+    return np.array(pairs, np.int64).reshape(-1, 2), np.array(dists, np.float32)
+
+
+def match(desc_a: np.ndarray, desc_b: np.ndarray, ratio: float = 0.8, cross_check: bool = False,
+          binary: bool | None = None) -> np.ndarray:
+    """Match descriptors of image A to image B.
+
+    Parameters
+    ----------
+    desc_a, desc_b : (Na, D), (Nb, D) float32 or uint8
+        Descriptors; uint8 means binary (Hamming distance) unless ``binary`` says otherwise.
+    ratio : float in (0, 1]
+        Lowe's ratio test: keep a match when best < ratio * second best. 1 keeps every nearest neighbour.
+    cross_check : bool
+        Keep only mutual matches (A's best in B whose best in A is that same point) that pass the ratio test.
+    binary : bool, optional
+        Force Hamming (True) or L2 (False) distance; default from the dtype.
+
+    Returns
+    -------
+    (M, 2) int64
+        Index pairs ``[i_a, i_b]``, sorted by descriptor distance (best first).
+    """
+    if not 0.0 < float(ratio) <= 1.0:
+        raise ValueError(f"`ratio` must be in (0, 1], got {ratio}")
+    desc_a, desc_b = np.asarray(desc_a), np.asarray(desc_b)
+    if desc_a.ndim != 2 or desc_b.ndim != 2 or desc_a.shape[1] != desc_b.shape[1]:
+        raise ValueError(f"descriptors must be 2-D with the same width, got {desc_a.shape} and {desc_b.shape}")
+    if binary is None:
+        binary = desc_a.dtype == np.uint8
+    if len(desc_a) == 0 or len(desc_b) == 0:
+        return np.zeros((0, 2), np.int64)
+    k = 2 if len(desc_b) >= 2 else 1
+    pairs, dists = _ratio_pairs(_knn(desc_a, desc_b, binary, k), ratio)
+    if cross_check and len(pairs):
+        back = _knn(desc_b, desc_a, binary, 1)
+        best_back = np.full(len(desc_b), -1, np.int64)
+        for m in back:
+            if m:
+                best_back[m[0].queryIdx] = m[0].trainIdx
+        keep = best_back[pairs[:, 1]] == pairs[:, 0]
+        pairs, dists = pairs[keep], dists[keep]
+    order = np.argsort(dists, kind="stable")
+    return pairs[order]

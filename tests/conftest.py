@@ -1,0 +1,36 @@
+"""Shared fixtures: the repository root, the real data root (skip when absent), and small synthetic images."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="session")
+def repo_root() -> Path:
+    return ROOT
+
+
+@pytest.fixture(scope="session")
+def data_root() -> Path:
+    """The real benchmark data (``$CVPIPE_DATA``, else ``../shared/data``); tests using it skip when absent."""
+    env = os.environ.get("CVPIPE_DATA")
+    root = Path(env) if env else ROOT.parent / "shared" / "data"
+    if not root.is_dir():
+        pytest.skip("real data not available (set CVPIPE_DATA)")
+    return root
+
+
+@pytest.fixture(scope="session")
+def textured_image() -> np.ndarray:
+    """A 480x640 grayscale photo (scikit-image astronaut) with plenty of texture for feature detectors."""
+    from cvpipe.samples import fit, photo
+
+    import cv2
+
+    return cv2.cvtColor(fit(photo("astronaut"), 640, 480), cv2.COLOR_BGR2GRAY)

@@ -1,0 +1,284 @@
+"""The report page: schema validation, escaping, relative links, task order, the stage and its dvc.yaml wiring."""
+
+from __future__ import annotations
+
+import copy
+import html
+import json
+import re
+import sys
+from html.parser import HTMLParser
+
+import pytest
+import yaml
+
+from cvpipe import io, report
+from cvpipe.errors import InputError
+from report_fixtures import NASTY, make_outputs, summary
+
+
+class _Collect(HTMLParser):
+    """Tags, attributes and text of a page, to check it without regular expressions on markup."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.tags: list[tuple[str, dict]] = []
+        self.text: list[str] = []
+
+    def handle_starttag(self, tag, attrs):
+        self.tags.append((tag, dict(attrs)))
+
+    def handle_data(self, data):
+        self.text.append(data)
+
+
+def parse(page: str) -> _Collect:
+    p = _Collect()
+    p.feed(page)
+    p.close()
+    return p
+
+
+def good(task="hough"):
+    return summary(task, [f"outputs/{task}/a.png"])
+
+
+# ---- validation -------------------------------------------------------------------------------------------------
+
+def test_a_valid_summary_passes_unchanged():
+    s = good()
+    assert report.validate_summary(copy.deepcopy(s), "x.json") == s
+
+
+def _break(mutate):
+    s = good()
+    mutate(s)
+    return s
+
+
+BAD = [
+    (lambda s: s.clear() or s.update({"a": 1}), r"missing key\(s\)"),
+    (lambda s: s.update(extra=1), r"unknown key\(s\) \['extra'\]"),
+    (lambda s: s.update(task="lines"), r"`task` must be one of \['logo', 'hough'"),
+    (lambda s: s.update(title="  "), r"`title` must not be empty"),
+    (lambda s: s.update(pictures={}), r"`pictures` must be a JSON array, got dict"),
+    (lambda s: s.update(timings=[]), r"`timings` must be a JSON object, got list"),
+    (lambda s: s.update(description=3), r"`description` must be a JSON string"),
+    (lambda s: s["pictures"].append({"path": "x.png"}), r"`pictures\[1\]` must be an object with keys"),
+    (lambda s: s["pictures"].append({"path": 3, "caption": "c"}), r"`pictures\[1\]` must have string"),
+    (lambda s: s["pictures"].append({"path": "/tmp/x.png", "caption": ""}), r"`pictures\[1\]\.path` must be a path"),
+    (lambda s: s["pictures"].append({"path": "outputs/../../x.png", "caption": ""}), r"relative to the repository"),
+    (lambda s: s["pictures"].append({"path": "outputs\\x.png", "caption": ""}), r"relative to the repository"),
+    (lambda s: s["pictures"].append({"path": "outputs/x.tiff", "caption": ""}), r"must be a PNG or JPEG file"),
+    (lambda s: s["tables"].append([1]), r"`tables\[1\]` must be an object with keys"),
+    (lambda s: s["tables"][0].update(title=1), r"`tables\[0\]\.title` must be a string"),
+    (lambda s: s["tables"][0].update(columns=[]), r"`tables\[0\]\.columns` must be a non-empty array"),
+    (lambda s: s["tables"][0].update(rows={}), r"`tables\[0\]\.rows` must be an array"),
+    (lambda s: s["tables"][0]["rows"].append(["ours", 1]), r"`tables\[0\]\.rows\[2\]` has 2 cells, expected 4"),
+    (lambda s: s["tables"][0]["rows"].append("ours"), r"`tables\[0\]\.rows\[2\]` has str cells, expected 4"),
+    (lambda s: s["tables"][0]["rows"][1].__setitem__(2, [1]), r"`tables\[0\]\.rows\[1\]\[2\]` must be a string, n"),
+    (lambda s: s["timings"].update(ours=-1.0), r"`timings\.ours` must be a finite number of seconds >= 0"),
+    (lambda s: s["timings"].update(ours=float("nan")), r"`timings\.ours` must be a finite number"),
+    (lambda s: s["timings"].update(ours=True), r"`timings\.ours` must be a finite number"),
+]
+
+
+@pytest.mark.parametrize("mutate, message", BAD)
+def test_each_schema_violation_is_refused_naming_the_file(mutate, message):
+    with pytest.raises(InputError, match=r"^outputs/hough/summary\.json: .*" + message):
+        report.validate_summary(_break(mutate), "outputs/hough/summary.json")
+
+
+def test_a_non_object_is_refused_naming_the_file():
+    with pytest.raises(InputError, match=r"^s\.json: expected a JSON object \(the task summary\), got list"):
+        report.validate_summary([], "s.json")
+
+
+def test_two_summaries_of_one_task_are_refused():
+    with pytest.raises(InputError, match="two summaries for task 'hough'"):
+        report.build_html([good(), good()])
+
+
+# ---- the page ---------------------------------------------------------------------------------------------------
+
+def test_sections_follow_the_fixed_task_order_and_missing_tasks_are_listed_as_not_run():
+    page = report.build_html([good("panorama"), good("logo"), good("stereo")])
+    ids = [a["id"] for t, a in parse(page).tags if t == "section"]
+    assert ids == ["task-logo", "task-stereo", "task-panorama"]
+    toc = page[page.index("<nav"):page.index("</nav>")]
+    for task in ("hough", "defect", "homography"):
+        assert re.search(rf"{report.TASK_NAMES[task]} \u2014 <span class=\"notrun\">not run</span>", toc), task
+    assert toc.count("not run") == 3 and "3 of 6 tasks have results" in page
+
+
+def test_every_user_text_is_escaped():
+    s = summary("defect", ["outputs/defect/a.png"], nasty=True)
+    page = report.build_html([s])
+    doc = parse(page)
+    # the only elements are the page's own: no <script> or <b> smuggled in through a title, caption or cell
+    assert {t for t, _ in doc.tags} <= {"html", "head", "meta", "title", "link", "style", "body", "main", "h1", "p",
+                                        "nav", "h3", "ol", "li", "a", "span", "section", "h2", "div", "figure",
+                                        "img", "figcaption", "table", "thead", "tr", "th", "tbody", "td", "footer",
+                                        "code"}
+    text = "".join(doc.text)
+    assert text.count(NASTY) >= 4  # title (twice: contents and section), description, caption, table title
+    alts = [a["alt"] for t, a in doc.tags if t == "img"]
+    assert alts == [f"a.png {NASTY}"]  # the attribute survives quotes intact
+
+
+def test_picture_links_are_relative_to_the_page_and_url_quoted():
+    s = summary("hough", ["outputs/hough/lines #1.png", "data/samples/hough/grid.png"])
+    doc = parse(report.build_html([s], base="outputs"))
+    srcs = [a["src"] for t, a in doc.tags if t == "img"]
+    assert srcs == ["hough/lines%20%231.png", "../data/samples/hough/grid.png"]
+    hrefs = [a["href"] for t, a in doc.tags if t == "a" and not a["href"].startswith("#")]
+    assert hrefs == srcs  # each picture links to its full-size file
+    deeper = parse(report.build_html([s], base="outputs/site"))
+    assert [a["src"] for t, a in deeper.tags if t == "img"][0] == "../hough/lines%20%231.png"
+
+
+def test_known_sizes_become_img_attributes_and_wide_pictures_span_the_row():
+    s = summary("panorama", ["outputs/panorama/ours.png", "outputs/panorama/input.jpg", "outputs/panorama/x.png"])
+    sizes = {"outputs/panorama/ours.png": (1200, 400), "outputs/panorama/input.jpg": (640, 480)}
+    doc = parse(report.build_html([s], sizes=sizes))
+    imgs = [a for t, a in doc.tags if t == "img"]
+    assert [(a.get("width"), a.get("height")) for a in imgs] == [("1200", "400"), ("640", "480"), (None, None)]
+    figures = [a.get("class") for t, a in doc.tags if t == "figure"]
+    assert figures == ["wide", None, None]  # 1200 / 400 = 3 >= WIDE_ASPECT; 640 / 480 is not; unknown stays
+
+
+def test_page_loads_nothing_from_the_network():
+    page = report.build_html([summary(t, [f"outputs/{t}/a.png"]) for t in report.TASKS])
+    doc = parse(page)
+    assert not [t for t, _ in doc.tags if t in ("script", "iframe", "object", "embed")]
+    urls = [v for _, a in doc.tags for k, v in a.items() if k in ("src", "href")]
+    assert urls and all(not re.match(r"^[a-z]+:", u) or u == "data:," for u in urls), urls
+    assert "@import" not in page and "url(" not in page
+
+
+def test_tables_format_numbers_and_timings_compare_to_the_fastest():
+    page = report.build_html([good()])
+    cells = re.findall(r"<td[^>]*>([^<]*)</td>", page)
+    assert cells[:8] == ["ours", "0.1235", "0.98", "yes", "opencv", "12346", "\u2013", "no"]
+    timing = page[page.index("<h3>Timings</h3>"):]
+    # fastest first, with its ratio to itself; the slower one 0.0123 / 0.0021 = 5.86 times
+    assert re.search(r"opencv</td><td class=\"num\">2.1 ms</td><td class=\"num\">1.00\u00d7", timing)
+    assert re.search(r"ours</td><td class=\"num\">12.3 ms</td><td class=\"num\">5.86\u00d7", timing)
+
+
+@pytest.mark.parametrize("value, text", [(None, "\u2013"), (True, "yes"), (3, "3"), (0.0, "0"), (2.5e-5, "2.50e-05"),
+                                         (float("inf"), "\u2013"), (123456.7, "123457"), ("x", "x")])
+def test_format_cell(value, text):
+    assert report.format_cell(value) == text
+
+
+def test_timing_rows_are_in_page_order():
+    rows = report.timing_rows([good("stereo"), good("logo")])
+    assert [(r["task"], r["method"]) for r in rows] == [("logo", "ours"), ("logo", "opencv"), ("stereo", "ours"),
+                                                        ("stereo", "opencv")]
+    assert rows[0] == {"task": "logo", "method": "ours", "label": "logo: ours", "seconds": 0.0123}
+
+
+# ---- the stage --------------------------------------------------------------------------------------------------
+
+def run_stage(monkeypatch, cwd, *args):
+    from stages import report as stage
+
+    monkeypatch.chdir(cwd)
+    monkeypatch.setattr(sys, "argv", ["stages.report", *args])
+    stage.main()
+
+
+def test_stage_renders_every_summary_and_the_timing_plot_data(tmp_path, monkeypatch):
+    made = make_outputs(tmp_path, ("stereo", "hough"))
+    run_stage(monkeypatch, tmp_path)
+    page = (tmp_path / "outputs/report.html").read_text(encoding="utf-8")
+    srcs = [a["src"] for t, a in parse(page).tags if t == "img"]
+    sizes = [(a["width"], a["height"]) for t, a in parse(page).tags if t == "img"]
+    assert sizes == [("320", "200"), ("160", "240")] * 2  # read from the files the fixture wrote
+    assert len(srcs) == 4 and all((tmp_path / "outputs" / re.sub("%20", " ", re.sub("%23", "#", s))).is_file()
+                                  for s in srcs)
+    rows = io.load_json(tmp_path / "outputs/plots/timings.json")
+    assert [r["task"] for r in rows] == ["hough", "hough", "stereo", "stereo"]
+    key = lambda r: r["label"]  # noqa: E731 - save_json sorts the timing keys, so only the set is fixed
+    assert sorted(rows, key=key) == sorted(report.timing_rows(made), key=key)
+    assert not list((tmp_path / "outputs").glob(".*tmp*"))  # the atomic writer left no temporary behind
+
+
+def test_stage_with_no_summaries_lists_every_task_as_not_run(tmp_path, monkeypatch):
+    run_stage(monkeypatch, tmp_path)
+    page = (tmp_path / "outputs/report.html").read_text(encoding="utf-8")
+    assert page.count("not run") == 6 and "<section" not in page
+    assert io.load_json(tmp_path / "outputs/plots/timings.json") == []
+
+
+def test_stage_names_the_file_whose_picture_is_missing(tmp_path, monkeypatch):
+    make_outputs(tmp_path, ("hough",))
+    (tmp_path / "outputs/hough/result.png").unlink()
+    with pytest.raises(SystemExit, match=r"cvpipe: error: outputs/hough/summary\.json: picture "
+                                         r"'outputs/hough/result\.png' does not exist"):
+        run_stage(monkeypatch, tmp_path)
+    assert not (tmp_path / "outputs/report.html").exists()
+
+
+def test_stage_names_the_summary_and_the_picture_that_is_not_an_image(tmp_path, monkeypatch):
+    make_outputs(tmp_path, ("hough",))
+    (tmp_path / "outputs/hough/result.png").write_bytes(b"not a png")
+    with pytest.raises(SystemExit, match=r"outputs/hough/summary\.json: picture outputs/hough/result\.png: not a "
+                                         r"readable image"):
+        run_stage(monkeypatch, tmp_path)
+
+
+def test_stage_names_the_file_whose_task_is_in_the_wrong_folder(tmp_path, monkeypatch):
+    make_outputs(tmp_path, ("hough",))
+    (tmp_path / "outputs/hough").rename(tmp_path / "outputs/stereo")
+    with pytest.raises(SystemExit, match=r"outputs/stereo/summary\.json: `task` is 'hough' but the file is in the "
+                                         r"folder of 'stereo'"):
+        run_stage(monkeypatch, tmp_path)
+
+
+def test_stage_names_the_file_that_breaks_the_schema(tmp_path, monkeypatch):
+    make_outputs(tmp_path, ("hough",))
+    path = tmp_path / "outputs/hough/summary.json"
+    bad = json.loads(path.read_text())
+    del bad["timings"]
+    path.write_text(json.dumps(bad))
+    with pytest.raises(SystemExit, match=r"outputs/hough/summary\.json: missing key\(s\) \['timings'\]"):
+        run_stage(monkeypatch, tmp_path)
+
+
+# ---- dvc.yaml wiring --------------------------------------------------------------------------------------------
+
+def test_report_stage_depends_on_the_summary_of_every_task_report_stage(repo_root):
+    dvc = yaml.safe_load((repo_root / "dvc.yaml").read_text())
+    stages = dvc["stages"]
+    deps = set(stages["report"]["deps"])
+    for task in report.TASKS:
+        if f"{task}_report" in stages:  # a task that landed: one dep line makes the report rerun on its results
+            assert f"outputs/{task}/summary.json" in deps, f"add `- outputs/{task}/summary.json` to report deps"
+    assert {"outputs/report.html", "outputs/plots/timings.json"} <= set(stages["report"]["outs"])
+
+
+def test_every_plot_file_is_written_by_a_stage(repo_root):
+    dvc = yaml.safe_load((repo_root / "dvc.yaml").read_text())
+    outs = []
+    for st in dvc["stages"].values():
+        for o in st.get("outs", []) + st.get("plots", []):
+            outs.append(next(iter(o)) if isinstance(o, dict) else o)
+    for entry in dvc["plots"]:
+        path = next(iter(entry)) if isinstance(entry, dict) else entry
+        cfg = entry[path] if isinstance(entry, dict) else {}
+        files = [path] if not isinstance(cfg.get("y"), dict) else list(cfg["y"])
+        for f in files:
+            assert any(f == o or f.startswith(o.rstrip("/") + "/") for o in outs), f"{f}: no stage writes it"
+
+
+def test_progress_is_quiet_when_not_on_a_terminal(capsys):
+    assert list(io.progress(range(5), "count")) == [0, 1, 2, 3, 4]
+    assert capsys.readouterr().err == ""  # pytest captures stderr, which is then not a terminal
+
+
+def test_escape_helper_round_trips():
+    s = summary("logo", ["outputs/logo/a.png"], nasty=True)
+    page = report.build_html([s])
+    assert html.unescape(page).count(NASTY) >= 4 and NASTY not in page
