@@ -20,6 +20,8 @@ import cv2
 import numpy as np
 from numba import njit, prange
 
+from . import metrics
+
 #: most bits a census signature can hold (uint64)
 _CENSUS_BITS = 64
 #: supported numbers of aggregation directions (4: horizontal and vertical; 8: also the diagonals)
@@ -487,6 +489,32 @@ def disparity_sgm(
     return disp
 
 
+def fill_invalid(disp: np.ndarray) -> np.ndarray:
+    """Fill NaN pixels with the smaller (background) of the nearest valid disparities on the same row.
+
+    The occlusion filling of Hirschmueller (2008): a pixel rejected by the left-right check is most often occluded,
+    and occluded pixels belong to the farther surface. Rows without any valid pixel stay NaN.
+
+    Parameters
+    ----------
+    disp : ndarray, (H, W) float
+        Disparity in pixels, NaN = invalid; values must be >= 0.
+
+    Returns
+    -------
+    ndarray, (H, W) float32
+        A filled copy.
+    """
+    if disp.ndim != 2:
+        raise ValueError(f"`disp` must be (H, W), got shape {disp.shape}")
+    work = np.where(np.isfinite(disp), disp, -1.0).astype(np.float32)
+    if (work[np.isfinite(disp)] < 0).any():
+        raise ValueError("`disp` must not contain negative disparities")
+    out = _fill_background(work)
+    out[out < 0] = np.nan
+    return out
+
+
 # ----------------------------------------------------------------------------------------------- OpenCV baselines
 
 #: OpenCV StereoSGBM modes by name
@@ -547,7 +575,7 @@ def disparity_opencv_bm(left: np.ndarray, right: np.ndarray, max_disp: int, *, b
 
 
 def disparity_opencv_sgbm(left: np.ndarray, right: np.ndarray, max_disp: int, *, mode: str = "sgbm",
-                          block_size: int = 5, uniqueness: int = 10, speckle_size: int = 100,
+                          block_size: int = 3, uniqueness: int = 10, speckle_size: int = 100,
                           speckle_range: int = 2, lr_max_diff: int = 1) -> np.ndarray:
     """OpenCV semi-global block matching (``cv2.StereoSGBM``), returned like :func:`disparity_sgm`.
 
@@ -599,3 +627,77 @@ def compute_disparity(left: np.ndarray, right: np.ndarray, max_disp: int, method
     if method not in METHODS:
         raise ValueError(f"`method` must be one of {sorted(METHODS)}, got {method!r}")
     return METHODS[method](left, right, max_disp, **options)
+
+
+# ----------------------------------------------------------------------------------------------- results
+
+
+#: bad-pixel thresholds in pixels used by the stages and the benchmark (Middlebury's bad-1.0 and bad-2.0)
+BAD_THRESHOLDS = (1.0, 2.0)
+
+
+def evaluate(disp: np.ndarray, truth: np.ndarray, thresholds: tuple[float, ...] = BAD_THRESHOLDS,
+             mask: np.ndarray | None = None) -> dict[str, float]:
+    """Accuracy of a disparity map against the truth, over the pixels with known truth.
+
+    Parameters
+    ----------
+    disp, truth : ndarray, (H, W) float
+        Estimated and true disparity in pixels; NaN = no estimate / unknown truth.
+    thresholds : tuple of float
+        Bad-pixel thresholds in pixels; each gives a key ``bad_<t>`` (e.g. ``bad_2.0``).
+    mask : ndarray, (H, W) bool, optional
+        Restrict the evaluation to these pixels.
+
+    Returns
+    -------
+    dict
+        ``bad_<t>`` (missing or off by more than t, share of known pixels), ``mean_error`` (pixels, over pixels
+        with both an estimate and truth) and ``density`` (share of known pixels with an estimate).
+    """
+    out = {f"bad_{float(t):.1f}": metrics.bad_pixel_rate(disp, truth, float(t), mask) for t in thresholds}
+    out["mean_error"] = metrics.mean_abs_error(disp, truth, mask)
+    out["density"] = metrics.density(disp, truth, mask)
+    return out
+
+
+def to_png16(disp: np.ndarray) -> np.ndarray:
+    """(H, W) uint16 image of ``round(256 * disparity)``, 0 where NaN (the KITTI convention; exact to 1/256 px).
+
+    Raises ``ValueError`` for negative disparities or disparities of 256 px or more, which the format cannot hold.
+    """
+    finite = np.isfinite(disp)
+    if finite.any() and (disp[finite].min() < 0 or disp[finite].max() >= 256):
+        raise ValueError("`disp` must lie in [0, 256) pixels to be stored as a 16-bit PNG")
+    out = np.zeros(disp.shape, np.uint16)
+    out[finite] = np.clip(np.round(disp[finite] * 256.0), 1, 65535).astype(np.uint16)
+    return out
+
+
+def colorize_disparity(disp: np.ndarray, max_disp: float) -> np.ndarray:
+    """(H, W, 3) uint8 BGR picture of a disparity map: turbo colour map over [0, max_disp], black where NaN."""
+    if not max_disp > 0:
+        raise ValueError(f"`max_disp` must be > 0, got {max_disp}")
+    finite = np.isfinite(disp)
+    scaled = np.zeros(disp.shape, np.uint8)
+    scaled[finite] = np.clip(disp[finite] / float(max_disp) * 255.0, 0, 255).astype(np.uint8)
+    pic = cv2.applyColorMap(scaled, cv2.COLORMAP_TURBO)
+    pic[~finite] = 0
+    return pic
+
+
+def error_picture(disp: np.ndarray, truth: np.ndarray, clip: float = 4.0) -> np.ndarray:
+    """(H, W, 3) uint8 BGR map of |disp - truth|: black (0) to white (>= ``clip`` px) on a hot scale; missing
+    estimates with known truth in blue, unknown truth in mid grey."""
+    if disp.shape != truth.shape:
+        raise ValueError(f"`disp` must have the shape of `truth` {truth.shape}, got {disp.shape}")
+    if not clip > 0:
+        raise ValueError(f"`clip` must be > 0, got {clip}")
+    known = np.isfinite(truth)
+    both = known & np.isfinite(disp)
+    scaled = np.zeros(disp.shape, np.uint8)
+    scaled[both] = np.clip(np.abs(disp[both] - truth[both]) / clip * 255.0, 0, 255).astype(np.uint8)
+    pic = cv2.applyColorMap(scaled, cv2.COLORMAP_HOT)
+    pic[known & ~both] = (255, 80, 0)
+    pic[~known] = (128, 128, 128)
+    return pic
