@@ -199,12 +199,12 @@ class StereoSgmParams:
     ad_weight: float = 0.5
     ad_trunc: int = 20
     paths: int = 8
-    p1: int = 10
-    p2: int = 120
+    p1: int = 15
+    p2: int = 150
     p2_tau: float = 16.0
     uniqueness: float = 0.0
     subpixel: bool = True
-    lr_max_diff: float = 1.0
+    lr_max_diff: float = 2.0
     speckle_size: int = 100
     speckle_range: float = 2.0
     fill: bool = False

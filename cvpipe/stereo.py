@@ -99,138 +99,176 @@ def _popcount(v):  # pragma: no cover - compiled
 
 
 @njit(cache=True, parallel=True)
-def _cost_volume(cen_l, cen_r, img_l, img_r, max_disp, ad_lut, use_ad, invalid_cost):  # pragma: no cover
-    """(H, W, D) uint16 matching cost: census Hamming distance (+ ad_lut[mean absolute colour difference])."""
+def _cost_volume(cen_l, cen_r, planes_l, planes_r, max_disp, ad_cap, ad_mult, invalid_cost):  # pragma: no cover
+    """(H, W, D) uint8 matching cost: census Hamming distance + (min(sum_c |L_c - R_c|, ad_cap) * ad_mult) >> 16.
+
+    ``planes_*`` are (C, H, W) int16 channel planes; ``ad_mult`` = 0 skips the absolute-difference term. The right
+    image's rows are reversed once so that the candidates x - d, d = 0, 1, ... of a pixel are a forward slice,
+    which LLVM vectorizes (a negative index expression would need numba's wraparound check).
+    """
     h, w = cen_l.shape
-    nch = img_l.shape[2]
-    cost = np.empty((h, w, max_disp), np.uint16)
+    nch = planes_l.shape[0]
+    cost = np.empty((h, w, max_disp), np.uint8)
     for y in prange(h):
-        cr = cen_r[y]
+        rev = cen_r[y, ::-1].copy()
+        rev_planes = np.empty((nch, w), np.int32)
+        for c in range(nch):
+            for i in range(w):
+                rev_planes[c, i] = planes_r[c, y, w - 1 - i]
+        adsum = np.zeros(max_disp, np.int32)
         for x in range(w):
             cl = cen_l[y, x]
             out = cost[y, x]
             nd = min(max_disp, x + 1)
+            base = w - 1 - x
+            seg = rev[base:base + nd]
             for d in range(nd):
-                out[d] = np.uint16(_popcount(cl ^ cr[x - d]))
+                out[d] = np.uint8(_popcount(cl ^ seg[d]))
             for d in range(nd, max_disp):
                 out[d] = invalid_cost
-            if use_ad:
+            if ad_mult > 0:
                 for d in range(nd):
-                    ad = 0
-                    for c in range(nch):
-                        ad += abs(np.int32(img_l[y, x, c]) - np.int32(img_r[y, x - d, c]))
-                    out[d] += ad_lut[ad // nch]
+                    adsum[d] = 0
+                for c in range(nch):
+                    lv = np.int32(planes_l[c, y, x])
+                    rseg = rev_planes[c, base:base + nd]
+                    for d in range(nd):
+                        adsum[d] += abs(lv - rseg[d])
+                for d in range(nd):
+                    out[d] += np.uint8((min(adsum[d], ad_cap) * ad_mult) >> 16)
     return cost
 
 
+# The kernels below index whole arrays with loop-invariant leading indices (buf[x, d]) instead of taking per-pixel
+# views (buf[x]): a view costs numba two atomic reference-count updates, which dominated the runtime. Previous and
+# current path costs live in distinct arrays (swapped, not offset), else LLVM cannot prove the loops independent.
+
+
 @njit(cache=True, inline="always")
-def _path_start(cost_px, cur, acc_px):  # pragma: no cover - compiled
+def _path_start(cost, y, x, cur, cx):  # pragma: no cover - compiled
     """First pixel of a path: L_r = C; returns min_d L_r."""
     m = np.int16(_BIG)
-    for d in range(cost_px.shape[0]):
-        v = np.int16(cost_px[d])
-        cur[d + 1] = v
-        acc_px[d] += np.uint16(v)
+    for d in range(cost.shape[2]):
+        v = np.int16(cost[y, x, d])
+        cur[cx, d + 1] = v
         m = min(m, v)
     return m
 
 
 @njit(cache=True, inline="always")
-def _path_step(prev, mprev, cost_px, p1, p2e, cur, acc_px):  # pragma: no cover - compiled
-    """One SGM recursion step; ``prev``/``cur`` (int16) hold L_r at indices 1..D with _BIG at 0 and D + 1.
+def _path_step(prev, px, mprev, cost, y, x, p1, p2e, cur, cx):  # pragma: no cover - compiled
+    """One SGM recursion step from prev[px] to cur[cx] (int16, L_r at 1..D, _BIG at 0 and D + 1).
 
     L_r(p, d) = C(p, d) + min(L_r(p-r, d), L_r(p-r, d+-1) + P1, min_k L_r(p-r, k) + P2') - min_k L_r(p-r, k).
     Returns min_d L_r(p, d). Every intermediate is cast back to int16 so that LLVM vectorizes the loops 16 or 32
     lanes wide (the first loop has no reduction, the second no dependency on the padded neighbours).
     """
     jump = np.int16(mprev + p2e)
-    nd = cost_px.shape[0]
+    nd = cost.shape[2]
     for d in range(nd):
-        v = np.int16(min(np.int16(min(prev[d], prev[d + 2]) + p1), prev[d + 1]))
-        cur[d + 1] = np.int16(np.int16(cost_px[d]) + np.int16(min(v, jump)) - mprev)
+        v = np.int16(min(np.int16(min(prev[px, d], prev[px, d + 2]) + p1), prev[px, d + 1]))
+        cur[cx, d + 1] = np.int16(np.int16(cost[y, x, d]) + np.int16(min(v, jump)) - mprev)
     m = np.int16(_BIG)
-    for d in range(nd):
-        v = cur[d + 1]
-        acc_px[d] += np.uint16(v)
-        m = min(m, v)
+    for d in range(1, nd + 1):
+        m = min(m, cur[cx, d])
     return m
 
 
-@njit(cache=True, parallel=True)
-def _aggregate_horizontal(cost, gray, p1, p2_lut, acc):  # pragma: no cover - compiled
-    """Add the left-to-right and right-to-left path costs to ``acc``; rows run in parallel.
+@njit(cache=True)
+def _sweep(cost, gray, dy, nk, p1, p2_lut, out):  # pragma: no cover - compiled
+    """Store in ``out`` the sum of the path costs arriving from the previous row, sweeping rows in order ``dy``:
+    directions (dy, dx) for dx in (-1, 0, 1) when ``nk`` = 3, or (dy, 0) when ``nk`` = 1.
 
-    ``p2_lut[|I(p) - I(p-r)|]`` is the edge-adapted P2 (int16, indexed by the grey-level step)."""
-    h, w, nd = cost.shape
-    for y in prange(h):
-        a = np.full(nd + 2, _BIG, np.int16)
-        b = np.full(nd + 2, _BIG, np.int16)
-        for direction in (1, -1):
-            x = 0 if direction == 1 else w - 1
-            m = _path_start(cost[y, x], a, acc[y, x])
-            for _ in range(w - 1):
-                px = x
-                x += direction
-                p2e = p2_lut[abs(np.int32(gray[y, x]) - np.int32(gray[y, px]))]
-                m = _path_step(a, m, cost[y, x], p1, p2e, b, acc[y, x])
-                a, b = b, a
-
-
-@njit(cache=True, parallel=True)
-def _aggregate_lines(cost, gray, dy, dx, blocks, p1, p2_lut, acc):  # pragma: no cover - compiled
-    """Add the path costs of direction (dy, dx), dy = +-1, to ``acc``.
-
-    The paths are the lines x - dx * s = k, where s counts rows in sweep order. Each (k0, k1) in ``blocks`` is a
-    group of adjacent lines that one thread sweeps together, so that it reads adjacent pixels of each row (cache
-    friendly) while the groups run in parallel without sharing any pixel.
+    The previous row's path costs stay in cache-sized row buffers, so the volumes are read once and written once
+    per sweep instead of once per direction.
     """
     h, w, nd = cost.shape
-    for b in prange(blocks.shape[0]):
-        k0 = blocks[b, 0]
-        g = blocks[b, 1] - k0
-        bufs = np.full((2, g, nd + 2), _BIG, np.int16)
-        mins = np.empty((2, g), np.int16)
-        for s in range(h):
-            y = s if dy > 0 else h - 1 - s
-            cur = s % 2
-            prev = 1 - cur
-            for i in range(g):
-                x = k0 + i + dx * s
-                if x < 0 or x >= w:
-                    continue
+    prev = np.full((nk * w, nd + 2), _BIG, np.int16)  # [k * w + x, 1 + d]
+    cur = np.full((nk * w, nd + 2), _BIG, np.int16)
+    mprev = np.zeros(nk * w, np.int16)
+    mcur = np.zeros(nk * w, np.int16)
+    for s in range(h):
+        y = s if dy > 0 else h - 1 - s
+        for x in range(w):
+            g_row = np.int32(gray[y, x])
+            for k in range(nk):
+                dx = k - 1 if nk == 3 else 0
                 px = x - dx
                 if s == 0 or px < 0 or px >= w:
-                    mins[cur, i] = _path_start(cost[y, x], bufs[cur, i], acc[y, x])
+                    mcur[k * w + x] = _path_start(cost, y, x, cur, k * w + x)
                 else:
-                    p2e = p2_lut[abs(np.int32(gray[y, x]) - np.int32(gray[y - dy, px]))]
-                    mins[cur, i] = _path_step(bufs[prev, i], mins[prev, i], cost[y, x], p1, p2e, bufs[cur, i],
-                                              acc[y, x])
-
-
-def _line_blocks(h: int, w: int, dx: int, size: int = 32) -> np.ndarray:
-    """(N, 2) int64 ranges [k0, k1) of the line index k = x - dx * s of direction dx, in groups of ``size``."""
-    lo = -(h - 1) if dx > 0 else 0
-    hi = w if dx >= 0 else w + h - 1
-    k0 = np.arange(lo, hi, size, dtype=np.int64)
-    return np.stack([k0, np.minimum(k0 + size, hi)], axis=1)
+                    p2e = p2_lut[abs(g_row - np.int32(gray[y - dy, px]))]
+                    mcur[k * w + x] = _path_step(prev, k * w + px, mprev[k * w + px], cost, y, x, p1, p2e, cur,
+                                                 k * w + x)
+            for d in range(nd):
+                out[y, x, d] = np.uint16(cur[x, d + 1])
+            for k in range(1, nk):
+                for d in range(nd):
+                    out[y, x, d] += np.uint16(cur[k * w + x, d + 1])
+        prev, cur = cur, prev
+        mprev, mcur = mcur, mprev
 
 
 @njit(cache=True, parallel=True)
-def _winner(acc, uniqueness, subpixel):  # pragma: no cover - compiled
-    """Winner-take-all disparity of the left image (float32, -1 = rejected) and of the right image (int32).
+def _aggregate(cost, gray, nk, p1, p2_lut):  # pragma: no cover - compiled
+    """Path costs summed over all directions, as two uint16 volumes whose sum is the aggregated cost S.
+
+    The downward and the upward sweep (``nk`` directions each, see :func:`_sweep`) run in parallel; then the
+    left-to-right and right-to-left paths of every row (rows in parallel) are added to the first volume.
+    """
+    h, w, nd = cost.shape
+    down = np.empty((h, w, nd), np.uint16)
+    up = np.empty((h, w, nd), np.uint16)
+    for i in prange(2):
+        if i == 0:
+            _sweep(cost, gray, 1, nk, p1, p2_lut, down)
+        else:
+            _sweep(cost, gray, -1, nk, p1, p2_lut, up)
+    for y in prange(h):
+        a = np.full((1, nd + 2), _BIG, np.int16)
+        b = np.full((1, nd + 2), _BIG, np.int16)
+        m = _path_start(cost, y, 0, a, 0)
+        for d in range(nd):
+            down[y, 0, d] += np.uint16(a[0, d + 1])
+        for x in range(1, w):
+            p2e = p2_lut[abs(np.int32(gray[y, x]) - np.int32(gray[y, x - 1]))]
+            m = _path_step(a, 0, m, cost, y, x, p1, p2e, b, 0)
+            for d in range(nd):
+                down[y, x, d] += np.uint16(b[0, d + 1])
+            a, b = b, a
+        m = _path_start(cost, y, w - 1, a, 0)
+        for d in range(nd):
+            down[y, w - 1, d] += np.uint16(a[0, d + 1])
+        for x in range(w - 2, -1, -1):
+            p2e = p2_lut[abs(np.int32(gray[y, x]) - np.int32(gray[y, x + 1]))]
+            m = _path_step(a, 0, m, cost, y, x, p1, p2e, b, 0)
+            for d in range(nd):
+                down[y, x, d] += np.uint16(b[0, d + 1])
+            a, b = b, a
+    return down, up
+
+
+@njit(cache=True, parallel=True)
+def _winner(down, up, uniqueness, subpixel):  # pragma: no cover - compiled
+    """Winner-take-all disparity of the left image (float32, -1 = rejected) and of the right image (int32) from the
+    aggregated cost S = down + up.
 
     The right image's disparity reuses the volume: D_R(xr) = argmin_d S(xr + d, d). A left pixel is rejected when a
     disparity more than one step from the winner costs less than (1 + uniqueness) times the winner's cost.
-    The loops are written as a min reduction, a search and a select so that LLVM vectorizes them.
     """
-    h, w, nd = acc.shape
+    h, w, nd = down.shape
     disp = np.empty((h, w), np.float32)
     disp_r = np.zeros((h, w), np.int32)
     for y in prange(h):
-        best_r = np.full(w, 65535, np.uint16)
-        arg_r = np.zeros(w, np.int32)
+        srow = np.empty((w, nd), np.uint16)
         for x in range(w):
-            s = acc[y, x]
+            a = down[y, x]
+            b = up[y, x]
+            s = srow[x]
+            for d in range(nd):
+                s[d] = a[d] + b[d]
+        for x in range(w):
+            s = srow[x]
             n = min(nd, x + 1)
             best = np.uint16(65535)
             for d in range(n):
@@ -238,12 +276,6 @@ def _winner(acc, uniqueness, subpixel):  # pragma: no cover - compiled
             bd = 0
             while s[bd] != best:
                 bd += 1
-            for d in range(n):
-                v = s[d]
-                j = x - d
-                better = v < best_r[j]
-                best_r[j] = v if better else best_r[j]
-                arg_r[j] = d if better else arg_r[j]
             if uniqueness > 0:
                 limit = best * (1.0 + uniqueness)
                 rejected = False
@@ -261,7 +293,15 @@ def _winner(acc, uniqueness, subpixel):  # pragma: no cover - compiled
                 if den > 0:
                     dv = np.float32(bd + 0.5 * (cm - cp) / den)
             disp[y, x] = dv
-        disp_r[y] = arg_r
+        for xr in range(w):
+            n = min(nd, w - xr)
+            best = np.uint16(65535)
+            for d in range(n):
+                best = min(best, srow[xr + d, d])
+            bd = 0
+            while srow[xr + bd, bd] != best:
+                bd += 1
+            disp_r[y, xr] = bd
     return disp, disp_r
 
 
@@ -369,12 +409,12 @@ def disparity_sgm(
     ad_weight: float = 0.5,
     ad_trunc: int = 20,
     paths: int = 8,
-    p1: int = 10,
-    p2: int = 120,
+    p1: int = 15,
+    p2: int = 150,
     p2_tau: float = 16.0,
     uniqueness: float = 0.0,
     subpixel: bool = True,
-    lr_max_diff: float = 1.0,
+    lr_max_diff: float = 2.0,
     speckle_size: int = 100,
     speckle_range: float = 2.0,
     fill: bool = False,
@@ -453,32 +493,32 @@ def disparity_sgm(
         raise ValueError(f"`speckle_range` must be >= 0, got {speckle_range}")
 
     gl, gr = _gray(left), _gray(right)
-    cl = left.reshape(left.shape[0], left.shape[1], -1)
-    cr = right.reshape(right.shape[0], right.shape[1], -1)
+    planes_l = np.ascontiguousarray(np.moveaxis(left.reshape(left.shape[0], left.shape[1], -1), 2, 0), np.int16)
+    planes_r = np.ascontiguousarray(np.moveaxis(right.reshape(right.shape[0], right.shape[1], -1), 2, 0), np.int16)
     ry, rx = census_size[0] // 2, census_size[1] // 2
-    ad_lut = np.round(ad_weight * np.minimum(np.arange(256), ad_trunc)).astype(np.int32)
-    c_max = _CENSUS_BITS + int(ad_lut[-1])
-    # every path cost is at most c_max + p2, so the sum over all paths must fit uint16
-    if c_max + p2 >= 8192:
-        raise ValueError(f"`ad_weight` * `ad_trunc` + `p2` too large: path costs would overflow "
-                         f"(64 + {c_max - 64} + {p2} >= 8192)")
+    nch = 1 if left.ndim == 2 else 3
+    # AD term = ad_weight * min(mean_c |dI_c|, ad_trunc) in 16.16 fixed point on the channel sum
+    ad_mult = int(round(ad_weight / nch * 65536))
+    ad_cap = int(ad_trunc) * nch
+    ad_max = (ad_cap * ad_mult) >> 16
+    bits = census_size[0] * census_size[1] - 1
+    c_max = bits + ad_max
+    # the cost volume is uint8; then every path cost is below 255 + p2 <= 4351 (int16 buffers, _BIG = 16000) and
+    # the sum of 8 paths below 65535 (uint16 volumes)
+    if c_max > 255:
+        raise ValueError(f"`ad_weight` * `ad_trunc` too large: the matching cost {bits} + {ad_max} "
+                         "must stay <= 255")
     gl_pad = np.pad(gl, ((ry, ry), (rx, rx)), mode="edge")
     gr_pad = np.pad(gr, ((ry, ry), (rx, rx)), mode="edge")
-    cost = _cost_volume(_census(gl_pad, ry, rx), _census(gr_pad, ry, rx), cl, cr, int(max_disp),
-                        ad_lut, bool(ad_weight > 0), np.uint16(c_max))
-    acc = np.zeros_like(cost)
+    cost = _cost_volume(_census(gl_pad, ry, rx), _census(gr_pad, ry, rx), planes_l, planes_r, int(max_disp),
+                        np.int32(ad_cap), np.int32(ad_mult), np.uint8(c_max))
     steps = np.arange(256, dtype=np.float64)
     p2_lut = np.full(256, p2, np.float64) if p2_tau == 0 else np.floor(p2 * p2_tau / (p2_tau + steps))
     p2_lut = np.maximum(p2_lut, p1 + 1).astype(np.int16)
-    args = (np.int16(p1), p2_lut, acc)
-    _aggregate_horizontal(cost, gl, *args)
-    h, w = gl.shape
-    for dy in (1, -1):
-        for dx in (-1, 0, 1) if paths == 8 else (0,):
-            _aggregate_lines(cost, gl, dy, dx, _line_blocks(h, w, dx), *args)
+    down, up = _aggregate(cost, gl, 3 if paths == 8 else 1, np.int16(p1), p2_lut)
     del cost
-    disp, disp_r = _winner(acc, float(uniqueness), bool(subpixel))
-    del acc
+    disp, disp_r = _winner(down, up, float(uniqueness), bool(subpixel))
+    del down, up
     if lr_max_diff >= 0:
         _lr_check(disp, disp_r, float(lr_max_diff))
     if speckle_size > 0:

@@ -176,7 +176,7 @@ def test_pair_validation():
     ({"uniqueness": 1.0}, r"`uniqueness` must be in \[0, 1\)"),
     ({"speckle_size": -1}, "`speckle_size` must be >= 0"),
     ({"speckle_range": -0.5}, "`speckle_range` must be >= 0"),
-    ({"ad_weight": 20.0, "ad_trunc": 255, "p2": 4000}, "path costs would overflow"),
+    ({"ad_weight": 2.0, "ad_trunc": 255}, r"`ad_weight` \* `ad_trunc` too large: the matching cost 34 \+ 510"),
 ])
 def test_sgm_option_validation(options, message):
     g = np.zeros((40, 60), np.uint8)
