@@ -431,14 +431,15 @@ def disparity_sgm(
         Odd (height, width) of the census window; at most 65 pixels so that a signature fits 64 bits.
     ad_weight : float
         Weight of the truncated mean absolute colour difference added to the census Hamming distance (0 = census
-        only). The cost of one disparity is ``hamming + round(ad_weight * min(AD, ad_trunc))``.
+        only). The cost of one disparity is ``hamming + floor(ad_weight * min(AD, ad_trunc))`` (fixed point), and
+        it must stay <= 255 (uint8 cost volume).
     ad_trunc : int
         Grey levels at which the absolute difference saturates, in [1, 255].
     paths : {8, 4}
-        Number of aggregation directions; 4 (horizontal and vertical only) is about twice as fast.
+        Number of aggregation directions; 4 (horizontal and vertical only) is faster.
     p1, p2 : int
         Penalties, in cost units (Hamming bits), for a disparity change of one pixel and of more than one pixel
-        between neighbours on a path; ``1 <= p1 < p2``.
+        between neighbours on a path; ``1 <= p1 < p2 <= 4096``.
     p2_tau : float
         Grey-level scale of the edge adaptation ``P2' = max(P2 * tau / (tau + |dI|), P1 + 1)``; 0 keeps P2 fixed.
     uniqueness : float
@@ -448,7 +449,8 @@ def disparity_sgm(
         Refine the winner with a parabola through the aggregated costs at d - 1, d, d + 1.
     lr_max_diff : float
         Largest accepted difference, in pixels, between the left disparity and the right image's disparity at
-        the matched pixel; negative disables the left-right check.
+        the matched pixel (the floor and the ceil of a sub-pixel disparity are both tried); negative disables the
+        left-right check.
     speckle_size : int
         Connected regions with fewer pixels than this are rejected (0 disables speckle removal).
     speckle_range : float

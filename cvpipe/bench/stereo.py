@@ -108,10 +108,11 @@ def _compile_seconds() -> dict:
     return {"compile_s": float(out[0]), "import_s": float(out[1])}
 
 
-def _timed(fn) -> float:
-    t0 = time.perf_counter()
+def _timed(fn) -> tuple[float, float]:
+    """(wall seconds, CPU seconds of the whole process, all threads) of one call."""
+    t0, c0 = time.perf_counter(), time.process_time()
     fn()
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, time.process_time() - c0
 
 
 def _best_sgbm(left, right, max_disp, truth) -> tuple[dict, np.ndarray]:
@@ -134,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
     pairs = load_pairs(Path(args.data))
     compile_info = {} if args.no_compile else _compile_seconds()
     probe = pairs["tsukuba"][0]
-    first_call = _timed(lambda: stereo.disparity_sgm(probe, pairs["tsukuba"][1], 16))
+    first_call = _timed(lambda: stereo.disparity_sgm(probe, pairs["tsukuba"][1], 16))[0]
 
     sgm = dataclasses.asdict(StereoSgmParams())
     bm = dataclasses.asdict(StereoBmParams())
@@ -156,11 +157,13 @@ def run(args: argparse.Namespace) -> int:
         for _ in range(args.repeats):  # interleaved, so that load from other processes hits every method alike
             for k, fn in methods.items():
                 times[k].append(_timed(fn))
-        med = {k: float(np.median(v)) for k, v in times.items()}
+        med = {k: float(np.median([t[0] for t in v])) for k, v in times.items()}
+        cpu = {k: float(np.median([t[1] for t in v])) for k, v in times.items()}
         for k, disp in disps.items():
-            t = med.get(k)
+            t, c = med.get(k), cpu.get(k)
             rows.append({"pair": name, "method": k, "max_disp": nd, **stereo.evaluate(disp, truth),
-                         "seconds": t, "time_ratio_to_sgbm": None if t is None else t / med["opencv_sgbm"]})
+                         "seconds": t, "time_ratio_to_sgbm": None if t is None else t / med["opencv_sgbm"],
+                         "cpu_seconds": c, "cpu_ratio_to_sgbm": None if c is None else c / cpu["opencv_sgbm"]})
 
     def by(method, key):
         return {r["pair"]: r[key] for r in rows if r["method"] == method}
@@ -176,22 +179,27 @@ def run(args: argparse.Namespace) -> int:
         "sgm_fill_bad2_not_worse_than_sgbm_fill": {p: bool(fill_b2[p] <= sgbm_fill_b2[p]) for p in fill_b2},
         "sgm_time_ratio_median": float(np.median(ratios)), "sgm_time_ratio_max": float(np.max(ratios)),
         "sgm_4path_time_ratio_median": float(np.median(list(by("sgm_4path", "time_ratio_to_sgbm").values()))),
+        "sgm_cpu_ratio_median": float(np.median(list(by("sgm", "cpu_ratio_to_sgbm").values()))),
+        "load_average_1min": os.getloadavg()[0],
     }
     if args.json:
         print(io.dumps_json({"summary": summary, "rows": rows}))
         return 0
     print(f"{'pair':<11} {'method':<17} {'bad-1.0':>8} {'bad-2.0':>8} {'mean err':>9} {'density':>8} "
-          f"{'time ms':>8} {'x SGBM':>7}")
+          f"{'time ms':>8} {'x SGBM':>7} {'cpu ms':>8} {'x SGBM':>7}")
     for r in rows:
         t = "" if r["seconds"] is None else f"{r['seconds'] * 1000:8.1f}"
         x = "" if r["time_ratio_to_sgbm"] is None else f"{r['time_ratio_to_sgbm']:7.2f}"
+        c = "" if r["cpu_seconds"] is None else f"{r['cpu_seconds'] * 1000:8.1f}"
+        cx = "" if r["cpu_ratio_to_sgbm"] is None else f"{r['cpu_ratio_to_sgbm']:7.2f}"
         print(f"{r['pair']:<11} {r['method']:<17} {100 * r['bad_1.0']:7.2f}% {100 * r['bad_2.0']:7.2f}% "
-              f"{r['mean_error']:9.3f} {100 * r['density']:7.1f}% {t:>8} {x:>7}")
+              f"{r['mean_error']:9.3f} {100 * r['density']:7.1f}% {t:>8} {x:>7} {c:>8} {cx:>7}")
     print("SGBM baseline per pair (lowest bad-2.0):",
           ", ".join(f"{p}: {c['mode']}/{c['block_size']}" for p, c in sgbm_choice.items()))
     print(f"sgm bad-2.0 <= SGBM on: {sum(summary['sgm_bad2_not_worse_than_sgbm'].values())}/{len(pairs)} pairs; "
           f"time ratio sgm / SGBM: median {summary['sgm_time_ratio_median']:.2f}, max "
-          f"{summary['sgm_time_ratio_max']:.2f} (4 paths: median {summary['sgm_4path_time_ratio_median']:.2f})")
+          f"{summary['sgm_time_ratio_max']:.2f} (4 paths: median {summary['sgm_4path_time_ratio_median']:.2f}); "
+          f"CPU time ratio median {summary['sgm_cpu_ratio_median']:.2f}; load average {summary['load_average_1min']:.1f}")
     print(f"first call (numba cache load or compile) {first_call:.2f} s"
           + (f"; compile with an empty cache {compile_info['compile_s']:.1f} s" if compile_info else ""))
     return 0
