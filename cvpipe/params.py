@@ -185,6 +185,63 @@ SECTIONS: dict[str, type] = {
 }
 
 
+# ---- hough ----
+
+
+@dataclass(frozen=True)
+class HoughEdgesParams:
+    """``hough.edges``: Canny edge map fed to both Hough implementations."""
+
+    canny_low: float = 50.0
+    canny_high: float = 150.0
+    aperture: int = 3
+    l2_gradient: bool = False
+    blur_sigma: float = 0.0
+
+    def __post_init__(self):
+        _in_range("canny_low", self.canny_low, 0.0)
+        _in_range("canny_high", self.canny_high, self.canny_low)
+        if self.aperture not in (3, 5, 7):
+            raise ValueError(f"`aperture` must be one of [3, 5, 7], got {self.aperture}")
+        _in_range("blur_sigma", self.blur_sigma, 0.0, 20.0)
+
+
+@dataclass(frozen=True)
+class HoughLinesParams:
+    """``hough.lines``: standard Hough transform, identical for ``ours`` and ``opencv``."""
+
+    rho: float = 1.0
+    theta_deg: float = 1.0
+    threshold: int = 150
+    refine: bool = False
+    repeats: int = 5
+
+    def __post_init__(self):
+        _in_range("rho", self.rho, 0.0, 100.0, lo_open=True)
+        _in_range("theta_deg", self.theta_deg, 0.0, 180.0, lo_open=True)
+        _in_range("threshold", self.threshold, 1)
+        _in_range("repeats", self.repeats, 1, 100)
+
+
+@dataclass(frozen=True)
+class HoughReportParams:
+    """``hough.report``: when a detected line counts as a sample's true line."""
+
+    rho_tol: float = 3.0
+    theta_tol_deg: float = 1.5
+
+    def __post_init__(self):
+        _in_range("rho_tol", self.rho_tol, 0.0, lo_open=True)
+        _in_range("theta_tol_deg", self.theta_tol_deg, 0.0, 90.0, lo_open=True)
+
+
+SECTIONS.update({
+    "hough.edges": HoughEdgesParams,
+    "hough.lines": HoughLinesParams,
+    "hough.report": HoughReportParams,
+})
+
+
 # ---- stereo ----
 # One section per compared method, so that `dvc repro` reruns only the method whose parameters changed (the
 # `stereo_disparity` matrix stage reads `stereo.<method>`); the defaults equal the function defaults in
