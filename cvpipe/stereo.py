@@ -275,52 +275,51 @@ def _winner(down, up, uniqueness, subpixel):  # pragma: no cover - compiled
 
     The right image's disparity reuses the volume: D_R(xr) = argmin_d S(xr + d, d). A left pixel is rejected when a
     disparity more than one step from the winner costs less than (1 + uniqueness) times the winner's cost.
+    Each row of S is transposed to (D, W) so that every minimum runs over contiguous x with branch-free selects.
     """
     h, w, nd = down.shape
     disp = np.empty((h, w), np.float32)
     disp_r = np.zeros((h, w), np.int32)
     for y in prange(h):
-        srow = np.empty((w, nd), np.uint16)
+        st = np.empty((nd, w), np.uint16)
         for x in range(w):
             for d in range(nd):
-                srow[x, d] = down[y, x, d] + up[y, x, d]
-        for x in range(w):
-            n = min(nd, x + 1)
-            best = np.uint16(65535)
-            for d in range(n):
-                best = min(best, srow[x, d])
-            bd = 0
-            while srow[x, bd] != best:
-                bd += 1
-            if uniqueness > 0:
-                limit = best * (1.0 + uniqueness)
-                rejected = False
-                for d in range(n):
-                    if (d < bd - 1 or d > bd + 1) and srow[x, d] < limit:
-                        rejected = True
-                if rejected:
-                    disp[y, x] = -1.0
-                    continue
-            dv = np.float32(bd)
-            if subpixel and 0 < bd < n - 1:
-                cm = np.float64(srow[x, bd - 1])
-                cp = np.float64(srow[x, bd + 1])
-                den = cm - 2.0 * best + cp
-                if den > 0:
-                    dv = np.float32(bd + 0.5 * (cm - cp) / den)
-            disp[y, x] = dv
-        # right image: the minimum along the diagonal S(xr + d, d), taken as a running minimum over d so that the
-        # inner loop runs over contiguous xr
+                st[d, x] = down[y, x, d] + up[y, x, d]
+        best = np.full(w, 65535, np.uint16)
+        arg = np.zeros(w, np.int32)
         best_r = np.full(w, 65535, np.uint16)
         arg_r = np.zeros(w, np.int32)
         for d in range(nd):
-            for xr in range(w - d):
-                v = srow[xr + d, d]
-                if v < best_r[xr]:
-                    best_r[xr] = v
-                    arg_r[xr] = d
-        for xr in range(w):
-            disp_r[y, xr] = arg_r[xr]
+            for x in range(d, w):  # left image: x - d >= 0
+                v = st[d, x]
+                better = v < best[x]
+                best[x] = v if better else best[x]
+                arg[x] = d if better else arg[x]
+            for xr in range(w - d):  # right image: xr + d < w
+                v = st[d, xr + d]
+                better = v < best_r[xr]
+                best_r[xr] = v if better else best_r[xr]
+                arg_r[xr] = d if better else arg_r[xr]
+        rejected = np.zeros(w, np.bool_)
+        if uniqueness > 0:
+            for d in range(nd):
+                for x in range(d, w):
+                    far = d < arg[x] - 1 or d > arg[x] + 1
+                    rejected[x] = rejected[x] or (far and st[d, x] < best[x] * (1.0 + uniqueness))
+        for x in range(w):
+            disp_r[y, x] = arg_r[x]
+            if rejected[x]:
+                disp[y, x] = -1.0
+                continue
+            bd = arg[x]
+            dv = np.float32(bd)
+            if subpixel and 0 < bd < min(nd, x + 1) - 1:
+                cm = np.float64(st[bd - 1, x])
+                cp = np.float64(st[bd + 1, x])
+                den = cm - 2.0 * np.float64(best[x]) + cp
+                if den > 0:
+                    dv = np.float32(bd + 0.5 * (cm - cp) / den)
+            disp[y, x] = dv
     return disp, disp_r
 
 

@@ -295,3 +295,21 @@ def test_middlebury_cones_beats_opencv_sgbm():
     # measured: ours 14-15 % bad-2.0, OpenCV SGBM (mode sgbm, block 3) 21 %; a real margin, not a tie
     assert ours["bad_2.0"] < sgbm["bad_2.0"] - 0.03
     assert ours["mean_error"] < 1.0
+
+
+def test_uniqueness_trades_density_for_reliability():
+    left, right, _ = random_dot_pair(constant(7.0))
+    rng = np.random.default_rng(1)
+    noisy = np.clip(right + rng.normal(0, 40, right.shape), 0, 255).astype(np.uint8)
+    inner = interior(left.shape)
+    checks_off = {"lr_max_diff": -1, "speckle_size": 0}  # isolate the uniqueness test
+    density, wrong = [], []
+    for u in (0.0, 0.3):
+        d = stereo.disparity_sgm(left, noisy, MAX_DISP, uniqueness=u, **checks_off)[inner]
+        ok = np.isfinite(d)
+        density.append(ok.mean())
+        wrong.append(np.mean(np.abs(d[ok] - 7.0) > 1))
+    # heavy noise: without the test every pixel answers (2 % wrong, measured); with it about 11 % are rejected and
+    # the wrong share among the kept pixels drops (to 1.1 %)
+    assert density[0] == 1.0 and density[1] < 0.95
+    assert wrong[1] < 0.8 * wrong[0]
