@@ -242,6 +242,192 @@ SECTIONS.update({
 })
 
 
+# ---- defect ----
+
+
+@dataclass(frozen=True)
+class DefectFeaturesParams(FeaturesParams):
+    """``defect.features``: ORB is 10x faster than SIFT here and ECC does the fine alignment anyway."""
+
+    detector: str = "orb"
+    max_features: int = 1000
+
+
+@dataclass(frozen=True)
+class DefectRegisterParams:
+    """``defect.register``: probe -> reference registration (RANSAC on matches, then ECC refinement)."""
+
+    ransac_threshold: float = 3.0
+    min_inliers: int = 15
+    min_inlier_ratio: float = 0.1
+    max_scale_change: float = 2.0
+    min_overlap: float = 0.4
+    ecc_levels: int = 2
+    ecc_scale: float = 0.5
+    ecc_iterations: int = 25
+    ecc_eps: float = 1e-4
+    min_correlation: float = 0.5
+    direct_fallback: bool = True
+    direct_min_correlation: float = 0.8
+    retry_correlation: float = 0.95
+    seed: int = 0
+
+    def __post_init__(self):
+        _in_range("ransac_threshold", self.ransac_threshold, 0.0, 100.0, lo_open=True)
+        _in_range("min_inliers", self.min_inliers, 4, 1_000_000)
+        _in_range("min_inlier_ratio", self.min_inlier_ratio, 0.0, 1.0)
+        _in_range("max_scale_change", self.max_scale_change, 1.0, 100.0)
+        _in_range("min_overlap", self.min_overlap, 0.0, 1.0, lo_open=True)
+        _in_range("ecc_levels", self.ecc_levels, 0, 6)
+        _in_range("ecc_scale", self.ecc_scale, 0.0, 1.0, lo_open=True)
+        _in_range("ecc_iterations", self.ecc_iterations, 1, 10_000)
+        _in_range("ecc_eps", self.ecc_eps, 0.0, 1.0, lo_open=True)
+        _in_range("min_correlation", self.min_correlation, -1.0, 1.0)
+        _in_range("direct_min_correlation", self.direct_min_correlation, -1.0, 1.0)
+        _in_range("retry_correlation", self.retry_correlation, -1.0, 1.0)
+
+
+@dataclass(frozen=True)
+class DefectDiffParams:
+    """``defect.diff``: photometric fit and the misregistration-tolerant difference."""
+
+    smooth_sigma: float = 1.0
+    tolerance_radius: int = 3
+    border_margin: int = 6
+    fit_trim: float = 3.0
+
+    def __post_init__(self):
+        _in_range("smooth_sigma", self.smooth_sigma, 0.0, 20.0)
+        _in_range("tolerance_radius", self.tolerance_radius, 0, 20)
+        _in_range("border_margin", self.border_margin, 0, 1000)
+        _in_range("fit_trim", self.fit_trim, 0.0, 100.0, lo_open=True)
+
+
+@dataclass(frozen=True)
+class DefectRegionParams:
+    """``defect.regions``: threshold, morphology, connected components, verdict."""
+
+    threshold: float = 0.15
+    seed_threshold: float = 0.3
+    seed_radius: int = 1
+    noise_factor: float = 6.0
+    open_radius: int = 1
+    close_radius: int = 5
+    min_area: int = 12
+    merge_distance: float = 8.0
+    pad: float = 0.0
+
+    def __post_init__(self):
+        _in_range("threshold", self.threshold, 0.0, 1.0, lo_open=True)
+        _in_range("seed_threshold", self.seed_threshold, self.threshold, 1.0)
+        _in_range("seed_radius", self.seed_radius, 0, 50)
+        _in_range("noise_factor", self.noise_factor, 0.0, 100.0)
+        _in_range("open_radius", self.open_radius, 0, 50)
+        _in_range("close_radius", self.close_radius, 0, 50)
+        _in_range("min_area", self.min_area, 1, 1_000_000)
+        _in_range("merge_distance", self.merge_distance, -1.0, 1000.0)
+        _in_range("pad", self.pad, 0.0, 1000.0)
+
+
+SECTIONS.update({
+    "defect.features": DefectFeaturesParams,
+    "defect.match": MatchParams,
+    "defect.register": DefectRegisterParams,
+    "defect.diff": DefectDiffParams,
+    "defect.regions": DefectRegionParams,
+})
+
+
+# ---------------------------------------------------------------------------------------------------- panorama
+
+
+@dataclass(frozen=True)
+class PanoramaFeaturesParams:
+    """``panorama.features``: features at the registration resolution (``work_megapix`` million pixels, <= 0 means
+    full resolution; ``cv2.Stitcher`` uses 0.6)."""
+
+    detector: str = "sift"
+    max_features: int = 1500
+    work_megapix: float = 0.6
+
+    def __post_init__(self):
+        _in_range("max_features", self.max_features, 1, 1_000_000)
+        _in_range("work_megapix", self.work_megapix, None, 1000)
+
+
+@dataclass(frozen=True)
+class PanoramaMatchParams:
+    """``panorama.match``: pairwise matching and the acceptance of a pair as an edge of the match graph; only each
+    image's ``candidates`` most promising partners are matched in full (0: every pair)."""
+
+    ratio: float = 0.8
+    ransac_threshold: float = 3.0
+    min_inliers: int = 10
+    min_confidence: float = 1.0
+    candidates: int = 5
+    seed: int = 0
+
+    def __post_init__(self):
+        _in_range("candidates", self.candidates, 0, None)
+        _in_range("ratio", self.ratio, 0.0, 1.0, lo_open=True)
+        _in_range("ransac_threshold", self.ransac_threshold, 0.0, None, lo_open=True)
+        _in_range("min_inliers", self.min_inliers, 4, None)
+        _in_range("min_confidence", self.min_confidence, 0.0, None)
+
+
+@dataclass(frozen=True)
+class PanoramaHomographiesParams:
+    """``panorama.homographies``: chaining along the maximum spanning tree, then joint least-squares refinement
+    (``refine``: auto, homography, rotation or none)."""
+
+    refine: str = "homography"
+    max_points_per_pair: int = 100
+
+    def __post_init__(self):
+        if self.refine not in ("auto", "homography", "rotation", "none"):
+            raise ValueError(f"`refine` must be one of ['auto', 'homography', 'rotation', 'none'], got {self.refine!r}")
+        _in_range("max_points_per_pair", self.max_points_per_pair, 4, None)
+
+
+@dataclass(frozen=True)
+class PanoramaWarpParams:
+    """``panorama.warp``: projection and compose resolution (``compose_megapix`` <= 0 means full resolution)."""
+
+    projection: str = "plane"
+    compose_megapix: float = -1.0
+    max_canvas_megapix: float = 200.0
+
+    def __post_init__(self):
+        if self.projection not in ("plane", "cylindrical", "spherical"):
+            raise ValueError(f"`projection` must be one of ['plane', 'cylindrical', 'spherical'], "
+                             f"got {self.projection!r}")
+        _in_range("compose_megapix", self.compose_megapix, None, 1000)
+        _in_range("max_canvas_megapix", self.max_canvas_megapix, 0.0, None, lo_open=True)
+
+
+@dataclass(frozen=True)
+class PanoramaBlendParams:
+    """``panorama.blend``: gain compensation and the blender (multi-band with ``bands`` levels, or feather)."""
+
+    blender: str = "multiband"
+    bands: int = 5
+    gain_compensation: bool = True
+
+    def __post_init__(self):
+        if self.blender not in ("multiband", "feather"):
+            raise ValueError(f"`blender` must be one of ['feather', 'multiband'], got {self.blender!r}")
+        _in_range("bands", self.bands, 1, 12)
+
+
+SECTIONS.update({
+    "panorama.features": PanoramaFeaturesParams,
+    "panorama.match": PanoramaMatchParams,
+    "panorama.homographies": PanoramaHomographiesParams,
+    "panorama.warp": PanoramaWarpParams,
+    "panorama.blend": PanoramaBlendParams,
+})
+
+
 # ---- stereo ----
 # One section per compared method, so that `dvc repro` reruns only the method whose parameters changed (the
 # `stereo_disparity` matrix stage reads `stereo.<method>`); the defaults equal the function defaults in

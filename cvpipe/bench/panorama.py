@@ -1,0 +1,196 @@
+"""``cvpipe bench panorama --data DIR``: our stitcher vs ``cv2.Stitcher`` on the Adobe and OpenStitching sets.
+
+Per set: success of both, images used and dropped (with our reasons), the pairwise corner error of our homographies
+against the Adobe ground truth (``HiitoJJ.txt`` maps image ii -> jj), the share of empty pixels after our crop, a
+ghosting measure (mean absolute grey difference of the overlapping warped images, after gain compensation) and the
+time of both, measured in the same process, interleaved, after a warm-up run, at the same registration and compose
+resolutions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import statistics
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from .. import blending, io, panorama, warping
+from ..errors import EstimationError, InputError
+from ..metrics import corner_error
+from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
+                      PanoramaWarpParams)
+
+HELP = "panorama stitching vs cv2.Stitcher on the Adobe and OpenStitching sets"
+EXAMPLE = "cvpipe bench panorama --data ../shared/data --repeat 3 --json"
+
+#: set name -> (folder under the data root, file names in input order, files that must be dropped)
+SETS = {
+    "goldengate": ("adobe_panoramas/goldengate", [f"goldengate-{k:02d}.png" for k in range(6)], []),
+    "halfdome-6": ("adobe_panoramas/halfdome", [f"halfdome-{k:02d}.png" for k in range(6)], []),
+    "halfdome-14": ("adobe_panoramas/halfdome", [f"halfdome-{k:02d}.png" for k in range(14)], []),
+    "budapest": ("stitching_tutorial/imgs", [f"budapest{k}.jpg" for k in range(1, 7)], []),
+    # the distractor sits between the real views, and those are shuffled: order must not matter
+    "weir+noise": ("stitching_tutorial/imgs", ["weir_3.jpg", "weir_noise.jpg", "weir_1.jpg", "weir_2.jpg"],
+                   ["weir_noise.jpg"]),
+    "exposure_error": ("stitching_tutorial/imgs", ["exposure_error_1.jpg", "exposure_error_2.jpg"], []),
+}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--data", default=os.environ.get("CVPIPE_DATA"),
+                        help="data root holding adobe_panoramas/ and stitching_tutorial/ (default $CVPIPE_DATA)")
+    parser.add_argument("--sets", nargs="+", choices=list(SETS), default=list(SETS), help="sets to run (default all)")
+    parser.add_argument("--repeat", type=int, default=3, help="timed runs of each method per set (default 3)")
+    parser.add_argument("--projection", choices=warping.PROJECTIONS, default="spherical",
+                        help="our projection (default spherical, cv2.Stitcher's default warper)")
+    parser.add_argument("--detector", default=PanoramaFeaturesParams().detector, help="our feature detector")
+    parser.add_argument("--out", help="folder for the panoramas (ours and OpenCV's) and results.json")
+    parser.add_argument("--json", action="store_true", help="print the results as JSON")
+
+
+def _gt_pairs(folder: Path, files: list[str]) -> dict[tuple[int, int], np.ndarray]:
+    """Ground-truth homographies (input position i -> j) of the Adobe files that are in ``files``."""
+    pos = {int(re.search(r"-(\d+)\.", f).group(1)): k for k, f in enumerate(files)}
+    out = {}
+    for p in folder.glob("H*to*.txt"):
+        ii, jj = (int(v) for v in re.fullmatch(r"H(\d+)to(\d+)\.txt", p.name).groups())
+        if ii in pos and jj in pos:
+            out[(pos[ii], pos[jj])] = np.loadtxt(p)
+    return out
+
+
+def _accuracy(pano: panorama.Panorama, gt: dict, sizes: list) -> dict:
+    """Corner error (image corners) and overlap error (grid points that the truth maps inside the other image) of
+    every ground-truth pair, in full-resolution pixels."""
+    corner, overlap, adjacent = [], [], []
+    for (i, j), H_gt in gt.items():
+        if i not in pano.homographies or j not in pano.homographies:
+            continue
+        H = np.linalg.inv(pano.homographies[j]) @ pano.homographies[i]
+        e = corner_error(H, H_gt, *sizes[i])
+        corner.append(e)
+        if abs(i - j) == 1:
+            adjacent.append(e)
+        w, h = sizes[i]
+        gx, gy = np.meshgrid(np.linspace(0, w - 1, 24), np.linspace(0, h - 1, 24))
+        g = np.column_stack([gx.ravel(), gy.ravel()])
+        t = warping.apply_h(H_gt, g)
+        inside = (t[:, 0] >= 0) & (t[:, 0] <= sizes[j][0] - 1) & (t[:, 1] >= 0) & (t[:, 1] <= sizes[j][1] - 1)
+        if inside.any():
+            overlap.append(float(np.linalg.norm(warping.apply_h(H, g[inside]) - t[inside], axis=1).mean()))
+    med = (lambda v: float(np.median(v)) if v else None)
+    return {"gt_pairs": len(corner), "corner_error_median": med(corner),
+            "corner_error_max": max(corner) if corner else None, "corner_error_adjacent_median": med(adjacent),
+            "overlap_error_median": med(overlap)}
+
+
+def _gt_consistency(gt: dict, sizes: list) -> float | None:
+    """Median corner disagreement between a ground-truth pair i -> j and its composition through a third image:
+    how far the ground truth itself is from one consistent set of homographies."""
+    errs = []
+    for (i, j), H in gt.items():
+        for (a, k), H1 in gt.items():
+            if a == i and (k, j) in gt and k != j:
+                errs.append(corner_error(gt[(k, j)] @ H1, H, *sizes[i]))
+    return float(np.median(errs)) if errs else None
+
+
+def _run_ours(images, cfg):
+    try:
+        return panorama.stitch(images, **cfg, rng=0), None
+    except EstimationError as exc:
+        return None, str(exc)
+
+
+def run(args: argparse.Namespace) -> int:
+    if not args.data:
+        raise InputError("no data root: pass --data DIR or set CVPIPE_DATA")
+    if args.repeat < 1:
+        raise ValueError(f"`--repeat` must be at least 1, got {args.repeat}")
+    root = Path(args.data)
+    feats = replace(PanoramaFeaturesParams(), detector=args.detector)
+    match, warp = PanoramaMatchParams(), replace(PanoramaWarpParams(), projection=args.projection)
+    cfg = {"features": feats, "matching": match, "homographies": PanoramaHomographiesParams(), "warp": warp,
+           "blend": PanoramaBlendParams()}
+    t0 = time.perf_counter()
+    blending.largest_rectangle(np.ones((4, 4), bool))  # numba: load or compile once, timed on its own
+    panorama._cholesky_solve(np.eye(2), np.ones(2))
+    compile_seconds = time.perf_counter() - t0
+    results = []
+    for name in args.sets:
+        folder, files, must_drop = SETS[name]
+        paths = [root / folder / f for f in files]
+        if not all(p.exists() for p in paths):
+            raise InputError(f"{root / folder}: missing {[p.name for p in paths if not p.exists()]}")
+        images = [io.read_image(p, "color") for p in paths]
+        sizes = [(im.shape[1], im.shape[0]) for im in images]
+        ours, err = _run_ours(images, cfg)  # warm-up run, also the result reported
+        cv = panorama.opencv_stitch(images, feats.work_megapix, warp.compose_megapix, match.min_confidence)
+        t_ours, t_cv = [], []
+        for _ in range(args.repeat):  # interleaved, so both see the same machine load
+            t = time.perf_counter()
+            _run_ours(images, cfg)
+            t_ours.append(time.perf_counter() - t)
+            t = time.perf_counter()
+            panorama.opencv_stitch(images, feats.work_megapix, warp.compose_megapix, match.min_confidence)
+            t_cv.append(time.perf_counter() - t)
+        row = {"set": name, "images": len(files), "ours_ok": ours is not None, "ours_error": err,
+               "opencv_status": cv[0], "opencv_used": [files[k] for k in cv[2]],
+               "ours_seconds": statistics.median(t_ours), "opencv_seconds": statistics.median(t_cv)}
+        row["time_ratio"] = row["ours_seconds"] / row["opencv_seconds"]
+        if ours is not None:
+            reg = ours.registration
+            dropped = {files[k]: why for k, why in reg.dropped}
+            row.update(used=[files[k] for k in reg.used], dropped=dropped, model=reg.model,
+                       expected_drops_ok=set(dropped) == set(must_drop), size=list(ours.image.shape[1::-1]),
+                       empty_share=float(1.0 - ours.mask.mean()), timings=ours.timings)
+            comp = panorama.compose_inputs(images, reg, panorama.working_images(images, feats.work_megapix)[1],
+                                           warp.compose_megapix)
+            w = warping.warp_images(comp.images, comp.G, warp.projection, comp.focal, comp.ref_size,
+                                    warp.max_canvas_megapix)
+            row["ghosting"] = blending.overlap_difference(w, blending.gain_compensation(w))
+            if folder.startswith("adobe"):
+                gt = _gt_pairs(root / folder, files)
+                row.update(_accuracy(ours, gt, sizes), gt_self_consistency=_gt_consistency(gt, sizes))
+            if args.out:
+                io.save_image(Path(args.out) / f"{name}_ours.jpg", ours.image, 90)
+        if args.out and cv[1] is not None:
+            io.save_image(Path(args.out) / f"{name}_opencv.jpg", cv[1], 90)
+        results.append(row)
+    summary = {
+        "sets": results, "numba_compile_or_load_seconds": compile_seconds, "repeat": args.repeat,
+        "projection": args.projection, "detector": args.detector, "work_megapix": feats.work_megapix,
+        "compose_megapix": warp.compose_megapix,
+        "all_stitched": all(r["ours_ok"] for r in results),
+        "time_ratio_total": sum(r["ours_seconds"] for r in results) / sum(r["opencv_seconds"] for r in results),
+    }
+    adobe = [r for r in results if r.get("corner_error_median") is not None]
+    if adobe:
+        summary["adobe_corner_error_median"] = {r["set"]: r["corner_error_median"] for r in adobe}
+    if args.out:
+        io.save_json(Path(args.out) / "results.json", summary)
+    if args.json:
+        print(io.dumps_json(summary))
+        return 0
+    print(f"panorama benchmark: projection {args.projection}, detector {args.detector}, registration "
+          f"{feats.work_megapix} MP, compose {'full' if warp.compose_megapix <= 0 else warp.compose_megapix} "
+          f"resolution, median of {args.repeat} interleaved runs; numba load/compile {compile_seconds:.2f} s")
+    print(f"{'set':15s} {'ours':>5s} {'cv2':>28s} {'used':>5s} {'corner px':>9s} {'adj px':>7s} "
+          f"{'ovl px':>7s} {'empty':>6s} {'ghost':>6s} {'ours s':>7s} {'cv2 s':>6s} {'ratio':>5s}")
+    fmt = (lambda v, f: "-" if v is None else format(v, f))
+    for r in results:
+        print(f"{r['set']:15s} {str(r['ours_ok']):>5s} {r['opencv_status'] + ' ' + str(len(r['opencv_used'])):>28s} "
+              f"{len(r.get('used', [])):>5d} {fmt(r.get('corner_error_median'), '.2f'):>9s} "
+              f"{fmt(r.get('corner_error_adjacent_median'), '.2f'):>7s} "
+              f"{fmt(r.get('overlap_error_median'), '.2f'):>7s} "
+              f"{fmt(r.get('empty_share'), '.3f'):>6s} {fmt(r.get('ghosting'), '.2f'):>6s} "
+              f"{r['ours_seconds']:7.2f} {r['opencv_seconds']:6.2f} {r['time_ratio']:5.2f}")
+        for f, why in r.get("dropped", {}).items():
+            print(f"{'':15s} dropped {f}: {why}")
+    print(f"total time ratio ours / cv2.Stitcher: {summary['time_ratio_total']:.2f}")
+    return 0

@@ -1,0 +1,239 @@
+"""Warping images into the panorama: canvas bounds and the plane, cylindrical and spherical projections.
+
+Every image ``i`` comes with a homography ``G[i]`` (its pixels -> reference pixels, ``det = 1``). The projections
+are parametrisations of the viewing directions of the reference camera ``K = [[f, 0, cx], [0, f, cy], [0, 0, 1]]``
+(``cx, cy`` the reference image centre, ``f`` the focal length in pixels):
+
+* ``plane``: panorama coordinates are reference pixels ``(u, v)``;
+* ``cylindrical``: ``u = f * theta`` (azimuth), ``v = f * y / sqrt(x^2 + z^2)`` for a ray ``(x, y, z)``;
+* ``spherical``: ``u = f * theta``, ``v = f * phi`` (elevation).
+
+For a rotating camera ``G[i] = K R_i K_i^-1``, so the pixel of image ``i`` that sees the reference ray ``r`` is
+``G[i]^-1 K r``; that product is evaluated directly, which stays valid for rays the reference plane cannot hold
+(beyond 90 degrees from its axis). Sampling is ours (:func:`canvas_to_image` builds the maps), ``cv2.remap`` does
+the bilinear interpolation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import cv2
+import numpy as np
+
+from .errors import EstimationError
+
+PROJECTIONS = ("plane", "cylindrical", "spherical")
+
+
+def check_projection(projection: str) -> None:
+    """Raise ``ValueError`` listing the choices when ``projection`` is unknown."""
+    if projection not in PROJECTIONS:
+        raise ValueError(f"`projection` must be one of {list(PROJECTIONS)}, got {projection!r}")
+
+
+def apply_h(H: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Apply the (3, 3) homography ``H`` to (N, 2) points; returns (N, 2) float64."""
+    pts = np.asarray(pts, np.float64).reshape(-1, 2)
+    p = pts @ H[:, :2].T + H[:, 2]
+    return p[:, :2] / p[:, 2:3]
+
+
+def camera_matrix(focal: float, ref_size: tuple[int, int]) -> np.ndarray:
+    """``K`` of the reference camera: focal ``focal`` pixels, principal point at the image centre."""
+    w, h = ref_size
+    return np.array([[focal, 0, (w - 1) / 2], [0, focal, (h - 1) / 2], [0, 0, 1.0]])
+
+
+def image_to_canvas(pts: np.ndarray, G: np.ndarray, projection: str, focal: float,
+                    ref_size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Panorama coordinates of image pixels.
+
+    Parameters
+    ----------
+    pts : (N, 2)
+        Pixels of the image.
+    G : (3, 3)
+        Image -> reference pixels, ``det(G) > 0``.
+    projection : {"plane", "cylindrical", "spherical"}
+    focal : float
+        Reference focal length in pixels (unused for ``plane``).
+    ref_size : (w, h)
+        Reference image size.
+
+    Returns
+    -------
+    uv : (N, 2) float64
+        Panorama coordinates (not yet shifted to the canvas origin).
+    ok : (N,) bool
+        False where the point has no image in this projection (behind the reference plane for ``plane``).
+    """
+    check_projection(projection)
+    pts = np.asarray(pts, np.float64).reshape(-1, 2)
+    ph = np.column_stack([pts, np.ones(len(pts))])
+    if projection == "plane":
+        p = ph @ G.T
+        ok = p[:, 2] > 1e-12 * np.abs(p).max(axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return p[:, :2] / p[:, 2:3], ok
+    r = ph @ (np.linalg.inv(camera_matrix(focal, ref_size)) @ G).T
+    rho = np.hypot(r[:, 0], r[:, 2])
+    ok = rho > 1e-12
+    theta = np.arctan2(r[:, 0], r[:, 2])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = r[:, 1] / rho if projection == "cylindrical" else np.arctan2(r[:, 1], rho)
+    return np.column_stack([focal * theta, focal * v]), ok
+
+
+def canvas_to_image(u: np.ndarray, v: np.ndarray, G: np.ndarray, projection: str, focal: float,
+                    ref_size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Image pixels seen at panorama coordinates ``(u, v)`` (arrays of any equal shape).
+
+    Returns
+    -------
+    x, y : float64 arrays shaped like ``u``
+        Image pixel coordinates.
+    ok : bool array
+        False where the ray is behind the image's camera.
+    """
+    check_projection(projection)
+    Ginv = np.linalg.inv(G)
+    if projection == "plane":
+        M = Ginv
+        a, b, c = u, v, np.float32(1) if u.dtype == np.float32 else 1.0
+    else:
+        M = Ginv @ camera_matrix(focal, ref_size)
+        focal = np.asarray(focal, np.asarray(u).dtype)
+        theta = u / focal
+        if projection == "cylindrical":
+            a, b, c = np.sin(theta), v / focal, np.cos(theta)
+        else:
+            phi = v / focal
+            a, b, c = np.sin(theta) * np.cos(phi), np.sin(phi), np.cos(theta) * np.cos(phi)
+    M = M.astype(np.asarray(u).dtype)
+    z = M[2, 0] * a + M[2, 1] * b + M[2, 2] * c
+    ok = z > 1e-12
+    zs = np.where(ok, z, z.dtype.type(1))
+    x = (M[0, 0] * a + M[0, 1] * b + M[0, 2] * c) / zs
+    y = (M[1, 0] * a + M[1, 1] * b + M[1, 2] * c) / zs
+    return x, y, ok
+
+
+def _border(size: tuple[int, int], per_side: int = 48) -> np.ndarray:
+    w, h = size
+    t = np.linspace(0, 1, per_side, endpoint=False)
+    x1, y1 = w - 1.0, h - 1.0
+    return np.concatenate([np.column_stack([t * x1, 0 * t]), np.column_stack([x1 + 0 * t, t * y1]),
+                           np.column_stack([x1 - t * x1, y1 + 0 * t]), np.column_stack([0 * t, y1 - t * y1])])
+
+
+def warp_bounds(sizes: Sequence[tuple[int, int]], G: Sequence[np.ndarray], projection: str, focal: float,
+                ref_size: tuple[int, int]) -> np.ndarray:
+    """Integer panorama-coordinate boxes ``[x0, y0, x1, y1]`` (inclusive-exclusive) of every warped image.
+
+    Raises
+    ------
+    EstimationError
+        When part of an image has no place in the projection (``plane`` beyond 180 degrees).
+    """
+    boxes = []
+    for k, (size, Gi) in enumerate(zip(sizes, G)):
+        uv, ok = image_to_canvas(_border(size), Gi, projection, focal, ref_size)
+        if not ok.all() or not np.isfinite(uv).all():
+            raise EstimationError(
+                f"warped image {k} reaches behind the reference view, which the `{projection}` projection cannot "
+                "hold; use projection cylindrical or spherical")
+        lo, hi = np.floor(uv.min(axis=0)), np.ceil(uv.max(axis=0)) + 1
+        boxes.append([lo[0], lo[1], hi[0], hi[1]])
+    return np.array(boxes, np.int64)
+
+
+@dataclass(frozen=True)
+class Warped:
+    """Images warped into a common canvas.
+
+    Attributes
+    ----------
+    images : list of (h_i, w_i, 3) uint8
+        Each warped image, cut to its box.
+    masks : list of (h_i, w_i) uint8
+        255 where the warped image has a pixel.
+    corners : list of (x, y)
+        Top-left canvas pixel of each box.
+    size : (W, H)
+        Canvas size in pixels.
+    origin : (x, y)
+        Panorama coordinates of canvas pixel (0, 0).
+    """
+
+    images: list
+    masks: list
+    corners: list
+    size: tuple
+    origin: tuple
+
+
+def warp_image(img: np.ndarray, G: np.ndarray, box: Sequence[int], projection: str, focal: float,
+               ref_size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Warp one image onto the panorama box ``[x0, y0, x1, y1]``.
+
+    Returns
+    -------
+    warped : (y1 - y0, x1 - x0[, 3]) uint8
+    mask : (y1 - y0, x1 - x0) uint8, 255 where the image has a pixel
+    """
+    x0, y0, x1, y1 = (int(b) for b in box)
+    # float32 keeps 1e-3 px precision on canvases of thousands of pixels at half the cost
+    u, v = np.meshgrid(np.arange(x0, x1, dtype=np.float32), np.arange(y0, y1, dtype=np.float32))
+    x, y, ok = canvas_to_image(u, v, G, projection, focal, ref_size)
+    h, w = img.shape[:2]
+    # half a pixel of slack: the border samples themselves belong to the image
+    ok &= (x > -0.5) & (x < w - 0.5) & (y > -0.5) & (y < h - 0.5)
+    mx = np.where(ok, x, np.float32(-10)).astype(np.float32, copy=False)
+    my = np.where(ok, y, np.float32(-10)).astype(np.float32, copy=False)
+    warped = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    warped[~ok] = 0
+    return warped, ok.astype(np.uint8) * 255
+
+
+def warp_images(images: Sequence[np.ndarray], G: Sequence[np.ndarray], projection: str, focal: float,
+                ref_size: tuple[int, int], max_canvas_megapix: float) -> Warped:
+    """Warp every image into one canvas.
+
+    Parameters
+    ----------
+    images : sequence of (h, w, 3) uint8
+    G : sequence of (3, 3)
+        Each image's pixels -> reference pixels (same resolution as ``images``), ``det > 0``.
+    projection : {"plane", "cylindrical", "spherical"}
+    focal : float
+        Reference focal length in pixels.
+    ref_size : (w, h)
+        Reference image size.
+    max_canvas_megapix : float
+        Refuse canvases larger than this (a plane projection of a wide view explodes).
+
+    Raises
+    ------
+    EstimationError
+        Canvas too large or views the projection cannot hold.
+    """
+    check_projection(projection)
+    if not focal > 0:
+        raise ValueError(f"`focal` must be positive, got {focal}")
+    sizes = [(im.shape[1], im.shape[0]) for im in images]
+    boxes = warp_bounds(sizes, G, projection, focal, ref_size)
+    ox, oy = int(boxes[:, 0].min()), int(boxes[:, 1].min())
+    W, H = int(boxes[:, 2].max()) - ox, int(boxes[:, 3].max()) - oy
+    if W * H > max_canvas_megapix * 1e6:
+        raise EstimationError(
+            f"the {projection} canvas would be {W}x{H} pixels (> max_canvas_megapix {max_canvas_megapix}); the "
+            "views are too wide for this projection: use cylindrical or spherical, or lower compose_megapix")
+    out_imgs, out_masks, corners = [], [], []
+    for img, Gi, box in zip(images, G, boxes):
+        warped, mask = warp_image(img, Gi, box, projection, focal, ref_size)
+        out_imgs.append(warped)
+        out_masks.append(mask)
+        corners.append((int(box[0]) - ox, int(box[1]) - oy))
+    return Warped(out_imgs, out_masks, corners, (W, H), (ox, oy))
