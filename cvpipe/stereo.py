@@ -65,8 +65,8 @@ def _gray(img: np.ndarray) -> np.ndarray:
 # ----------------------------------------------------------------------------------------------- numba kernels
 
 
-#: "infinite" path cost in the int16 path buffers; real path costs stay below 8192 (checked in disparity_sgm), so
-#: _BIG + P1 cannot overflow int16 and _BIG never wins a minimum
+#: "infinite" path cost in the int16 path buffers; real path costs stay <= 255 + P2 <= 4351 (checked in disparity_sgm),
+#: so _BIG + P1 cannot overflow int16 and _BIG never wins a minimum
 _BIG = 16000
 
 

@@ -199,7 +199,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"sgm bad-2.0 <= SGBM on: {sum(summary['sgm_bad2_not_worse_than_sgbm'].values())}/{len(pairs)} pairs; "
           f"time ratio sgm / SGBM: median {summary['sgm_time_ratio_median']:.2f}, max "
           f"{summary['sgm_time_ratio_max']:.2f} (4 paths: median {summary['sgm_4path_time_ratio_median']:.2f}); "
-          f"CPU time ratio median {summary['sgm_cpu_ratio_median']:.2f}; load average {summary['load_average_1min']:.1f}")
+          f"CPU time ratio median {summary['sgm_cpu_ratio_median']:.2f}; "
+          f"load average {summary['load_average_1min']:.1f}")
     print(f"first call (numba cache load or compile) {first_call:.2f} s"
           + (f"; compile with an empty cache {compile_info['compile_s']:.1f} s" if compile_info else ""))
     return 0
