@@ -185,6 +185,44 @@ SECTIONS: dict[str, type] = {
 }
 
 
+# ---- homography ----
+
+
+@dataclass(frozen=True)
+class HomographyEstimateParams:
+    """``homography.estimate``: robust homography from the matches (the same settings for every method)."""
+
+    threshold: float = 3.0
+    confidence: float = 0.999
+    max_iters: int = 10_000
+    seed: int = 0
+
+    def __post_init__(self):
+        _in_range("threshold", self.threshold, 0.0, None, lo_open=True)
+        _in_range("confidence", self.confidence, 0.0, 1.0, lo_open=True)
+        if self.confidence >= 1.0:
+            raise ValueError(f"`confidence` must be in (0, 1), got {self.confidence}")
+        _in_range("max_iters", self.max_iters, 1, 10_000_000)
+
+
+@dataclass(frozen=True)
+class HomographyReportParams:
+    """``homography.report``: success criterion and the alignment pictures."""
+
+    success_px: float = 3.0
+    checker_tiles: int = 8
+
+    def __post_init__(self):
+        _in_range("success_px", self.success_px, 0.0, None, lo_open=True)
+        _in_range("checker_tiles", self.checker_tiles, 1, 256)
+
+
+SECTIONS.update({
+    "homography.estimate": HomographyEstimateParams,
+    "homography.report": HomographyReportParams,
+})
+
+
 # ---- hough ----
 
 
@@ -425,6 +463,61 @@ SECTIONS.update({
     "panorama.homographies": PanoramaHomographiesParams,
     "panorama.warp": PanoramaWarpParams,
     "panorama.blend": PanoramaBlendParams,
+})
+
+
+# ---- logo ----
+
+
+@dataclass(frozen=True)
+class LogoMatchParams:
+    """``logo.match``: scene -> gallery matching (see :func:`cvpipe.logos.match_scene`)."""
+
+    ratio: float = 0.9
+    k: int = 8
+    per_reference: int = 1
+    min_features: int = 8
+
+    def __post_init__(self):
+        _in_range("ratio", self.ratio, 0.0, 1.0, lo_open=True)
+        _in_range("k", self.k, 2, 100)
+        _in_range("per_reference", self.per_reference, 1, self.k)
+        _in_range("min_features", self.min_features, 4, 100_000)
+
+
+@dataclass(frozen=True)
+class LogoVerifyParams:
+    """``logo.verify``: homography verification, plausibility checks and the decision threshold."""
+
+    ransac_threshold: float = 4.0
+    max_iters: int = 2000
+    max_models: int = 3
+    min_matches: int = 6
+    min_inliers: int = 6
+    min_area: float = 0.001
+    max_area: float = 4.0
+    max_anisotropy: float = 6.0
+    max_perspective: float = 30.0
+    min_spread: float = 0.05
+    score_threshold: float = 0.0
+
+    def __post_init__(self):
+        _in_range("ransac_threshold", self.ransac_threshold, 0.0, 100.0, lo_open=True)
+        _in_range("max_iters", self.max_iters, 1, 10_000_000)
+        _in_range("max_models", self.max_models, 1, 100)
+        _in_range("min_matches", self.min_matches, 4, 100_000)
+        _in_range("min_inliers", self.min_inliers, 4, 100_000)
+        _in_range("min_area", self.min_area, 0.0, 1.0, lo_open=True)
+        _in_range("max_area", self.max_area, self.min_area, 100.0)
+        _in_range("max_anisotropy", self.max_anisotropy, 1.0, 1000.0)
+        _in_range("max_perspective", self.max_perspective, 1.0, 1e6)
+        _in_range("min_spread", self.min_spread, 0.0, 1.0)
+
+
+SECTIONS.update({
+    "logo.features": FeaturesParams,
+    "logo.match": LogoMatchParams,
+    "logo.verify": LogoVerifyParams,
 })
 
 

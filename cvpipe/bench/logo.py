@@ -1,0 +1,166 @@
+"""``cvpipe bench logo``: FlickrLogos-27 subset, the four detectors compared.
+
+Protocol (see the data set's SOURCE.txt): the gallery is every box of the 80 boxed training photos, cropped, plus
+``gallery/<Brand>.png``; the test scenes are the 50 query photos (brand known, no box) and the 20 no-logo photos.
+Gallery features are detected once per method (the cached gallery); the time per scene covers scene feature
+detection, matching and verification (not reading the file), measured per scene with the methods interleaved after a
+warm-up, and reported as medians.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from .. import io, logos
+from ..errors import InputError
+from ..features import DETECTORS, detect
+from ..params import FeaturesParams, LogoMatchParams, LogoVerifyParams, load_section
+
+HELP = "logo recognition on the FlickrLogos-27 subset: precision, recall, accuracy, PR curve, time per scene"
+EXAMPLE = "cvpipe bench logo --data ../shared/data --json"
+SUBSET = "flickrlogos27_subset"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--data", default=os.environ.get("CVPIPE_DATA"),
+                        help="data root holding flickrlogos27_subset/ (default: $CVPIPE_DATA)")
+    parser.add_argument("--methods", nargs="+", default=list(DETECTORS), choices=list(DETECTORS),
+                        help="detectors to compare (default: all four)")
+    parser.add_argument("--params", default="params.yaml",
+                        help="params.yaml with the logo.* sections (default: params.yaml; dataclass defaults "
+                             "when the file does not exist)")
+    parser.add_argument("--min-box", type=int, default=16,
+                        help="skip training boxes whose shorter side is below this many pixels (default 16)")
+    parser.add_argument("--seed", type=int, default=0, help="RANSAC seed (default 0)")
+    parser.add_argument("--json", action="store_true", help="print the full result (with PR curves) as JSON")
+
+
+def load_subset(root: Path, min_box: int = 16) -> tuple[list[tuple[str, str, np.ndarray, tuple | None]],
+                                                       list[tuple[str, str | None]]]:
+    """Gallery references ``(brand, name, gray, box or None)`` and test scenes ``(path, brand or None)``.
+
+    A boxed training photo gives one reference per box: the whole photo with the box (clipped to the image), so
+    that keypoints come from inside the box while their descriptors see the photo around it.
+    """
+    scenes_csv = root / "scenes.csv"
+    if not scenes_csv.is_file():
+        raise InputError(f"{scenes_csv}: no such file; expected the {SUBSET} folder (see its SOURCE.txt)")
+    gallery: list[tuple[str, str, np.ndarray, tuple | None]] = []
+    tests: list[tuple[str, str | None]] = []
+    seen: set[tuple] = set()
+    with scenes_csv.open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    cache: dict[str, np.ndarray] = {}
+    for row in rows:
+        kind, brand, image = row["gt_kind"], row["brand"], row["image"]
+        if kind == "bbox":
+            x1, y1, x2, y2 = (int(float(row[k])) for k in ("x1", "y1", "x2", "y2"))
+            key = (image, x1, y1, x2, y2)
+            if key in seen or min(x2 - x1, y2 - y1) < min_box:
+                continue
+            seen.add(key)
+            if image not in cache:
+                cache[image] = io.read_image(root / image, "gray")
+            img = cache[image]
+            h, w = img.shape
+            box = (max(x1, 0), max(y1, 0), min(x2, w - 1), min(y2, h - 1))
+            gallery.append((brand, f"{image}[{x1},{y1},{x2},{y2}]", img, box))
+        elif (image, kind) not in seen:
+            seen.add((image, kind))
+            tests.append((image, None if kind == "negative" or brand.lower() == "none" else brand))
+    for f in io.list_images(root / "gallery"):
+        gallery.append((f.stem, str(f.relative_to(root)), io.read_image(f, "gray"), None))
+    return gallery, tests
+
+
+def _mask(shape: tuple[int, int], box: tuple | None) -> np.ndarray | None:
+    if box is None:
+        return None
+    mask = np.zeros(shape, np.uint8)
+    x1, y1, x2, y2 = (int(round(v)) for v in box)
+    mask[y1:y2 + 1, x1:x2 + 1] = 255
+    return mask
+
+
+def _params(path: str) -> tuple[FeaturesParams, LogoMatchParams, LogoVerifyParams]:
+    if Path(path).is_file():
+        return (load_section(FeaturesParams, "logo.features", path), load_section(LogoMatchParams, "logo.match", path),
+                load_section(LogoVerifyParams, "logo.verify", path))
+    return FeaturesParams(), LogoMatchParams(), LogoVerifyParams()
+
+
+def run_benchmark(root: Path, methods: list[str], fp: FeaturesParams, mp: LogoMatchParams, vp: LogoVerifyParams,
+                  min_box: int = 16, seed: int = 0) -> dict:
+    """Run every method on the subset; returns per-method metrics, curves, per-scene answers and timings."""
+    gallery_imgs, tests = load_subset(root, min_box)
+    galleries, gallery_time = {}, {}
+    for m in methods:
+        t0 = time.perf_counter()
+        refs = [logos.Reference(b, n, detect(g, m, fp.max_features, _mask(g.shape, box)), (g.shape[1], g.shape[0]),
+                                box) for b, n, g, box in gallery_imgs]
+        galleries[m] = logos.build_gallery(refs, mp.min_features)
+        gallery_time[m] = time.perf_counter() - t0
+    scenes = [(f, b, io.read_image(root / f, "gray")) for f, b in tests]
+    # warm-up: one scene per method (FLANN, OpenCV thread pools, scipy imports)
+    for m in methods:
+        g = scenes[0][2]
+        logos.recognize(galleries[m], detect(g, m, fp.max_features), (g.shape[1], g.shape[0]), mp, vp, seed)
+    times = {m: [] for m in methods}
+    answers = {m: [] for m in methods}
+    for f, brand, g in tqdm(scenes, desc="logo bench", disable=None):
+        for m in methods:  # interleaved, so load changes on the shared machine hit every method alike
+            t0 = time.perf_counter()
+            det = logos.recognize(galleries[m], detect(g, m, fp.max_features), (g.shape[1], g.shape[0]), mp, vp, seed)
+            times[m].append(time.perf_counter() - t0)
+            best = det.best
+            answers[m].append({"scene": f, "truth": brand, "brand": det.brand,
+                               "best_brand": best.brand if best else None, "score": det.score,
+                               "inliers": det.inliers})
+    result = {"protocol": {"gallery_references": {m: len(galleries[m].references) for m in methods},
+                           "gallery_dropped": {m: len(galleries[m].dropped) for m in methods},
+                           "test_scenes": len(tests), "with_logo": sum(b is not None for _, b in tests),
+                           "score_threshold": vp.score_threshold},
+              "methods": {}}
+    for m in methods:
+        a = answers[m]
+        ev = logos.evaluate([x["truth"] for x in a], [x["best_brand"] for x in a], [x["score"] for x in a],
+                            vp.score_threshold)
+        ev["time_per_scene_median_s"] = statistics.median(times[m])
+        ev["gallery_index_s"] = gallery_time[m]
+        ev["best_precision_at_recall_0.70"] = max((c["precision"] for c in ev["curve"] if c["recall"] >= 0.70),
+                                                  default=None)
+        ev["scenes_detail"] = a
+        result["methods"][m] = ev
+    return result
+
+
+def run(args: argparse.Namespace) -> int:
+    if not args.data:
+        raise InputError("no data root: pass --data DIR or set CVPIPE_DATA")
+    if args.min_box < 1:
+        raise InputError(f"`--min-box` must be a positive number of pixels, got {args.min_box}")
+    root = Path(args.data)
+    if (root / SUBSET).is_dir():
+        root = root / SUBSET
+    fp, mp, vp = _params(args.params)
+    res = run_benchmark(root, args.methods, fp, mp, vp, args.min_box, args.seed)
+    if args.json:
+        print(io.dumps_json(res))
+        return 0
+    pr = res["protocol"]
+    print(f"FlickrLogos-27 subset: {pr['test_scenes']} test scenes ({pr['with_logo']} with a logo), gallery "
+          f"{pr['gallery_references']} references, score threshold {pr['score_threshold']}")
+    print(f"{'method':8s} {'precision':>9s} {'recall':>7s} {'accuracy':>8s} {'P@R>=0.70':>9s} {'s/scene':>8s}")
+    for m, ev in res["methods"].items():
+        p70 = ev["best_precision_at_recall_0.70"]
+        print(f"{m:8s} {ev['precision']:9.3f} {ev['recall']:7.3f} {ev['accuracy']:8.3f} "
+              f"{'-' if p70 is None else f'{p70:.3f}':>9s} {ev['time_per_scene_median_s']:8.3f}")
+    return 0

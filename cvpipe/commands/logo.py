@@ -1,0 +1,103 @@
+"""``cvpipe logo``: which gallery brand is in each scene photo, and where."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+from .. import io, logos
+from ..errors import CvpipeError, InputError
+from ..features import DETECTORS, detect
+from ..params import FeaturesParams, LogoMatchParams, LogoVerifyParams
+
+HELP = "recognise gallery logos in scene photos (brand or none, and the logo outline)"
+EXAMPLE = "cvpipe logo data/samples/logo/scenes/scene_00.jpg --gallery data/samples/logo/gallery --json"
+
+
+def gallery_files(folder: str | Path) -> list[tuple[str, Path]]:
+    """``(brand, file)`` for ``DIR/<brand>.<ext>`` and ``DIR/<brand>/*.<ext>``, sorted.
+
+    Raises
+    ------
+    InputError
+        The folder does not exist or holds no image in either layout.
+    """
+    root = Path(folder)
+    if not root.is_dir():
+        raise InputError(f"{root}: gallery folder does not exist")
+    items = [(f.stem, f) for f in io.list_images(root)]
+    for sub in sorted(p for p in root.iterdir() if p.is_dir()):
+        items += [(sub.name, f) for f in io.list_images(sub)]
+    if not items:
+        raise InputError(f"{root}: the gallery is empty; expected {root}/<brand>.png or {root}/<brand>/*.png "
+                         f"(any of {', '.join(io.IMAGE_SUFFIXES)})")
+    return sorted(items, key=lambda t: (t[0], str(t[1])))
+
+
+def load_gallery(folder: str | Path, detector: str, max_features: int, min_features: int) -> logos.Gallery:
+    """Read, detect and index a gallery folder (see :func:`gallery_files`)."""
+    refs = []
+    for brand, f in gallery_files(folder):
+        gray = io.read_image(f, "gray")
+        refs.append(logos.Reference(brand, str(f), detect(gray, detector, max_features), (gray.shape[1], gray.shape[0])))
+    return logos.build_gallery(refs, min_features)
+
+
+def detection_json(scene: str, det: logos.Detection) -> dict:
+    """The interface-contract record of one scene (``score`` is null when no hypothesis survived)."""
+    return {"scene": scene, "brand": det.brand, "inliers": int(det.inliers),
+            "score": round(float(det.score), 3) if math.isfinite(det.score) else None,
+            "quad": None if det.quad is None else [[round(float(x), 2), round(float(y), 2)] for x, y in det.quad]}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    fp, mp, vp = FeaturesParams(), LogoMatchParams(), LogoVerifyParams()
+    parser.add_argument("scenes", nargs="+", metavar="SCENE", help="scene photos")
+    parser.add_argument("--gallery", required=True, metavar="DIR",
+                        help="reference logos: DIR/<brand>.<ext> or DIR/<brand>/*.<ext>")
+    parser.add_argument("--method", default=fp.detector, choices=list(DETECTORS),
+                        help=f"keypoint detector (default {fp.detector})")
+    parser.add_argument("--max-features", type=int, default=fp.max_features,
+                        help=f"keypoints per image (default {fp.max_features})")
+    parser.add_argument("--ratio", type=float, default=mp.ratio, help=f"ratio test (default {mp.ratio})")
+    parser.add_argument("--threshold", type=float, default=vp.score_threshold,
+                        help=f"score (-log10 NFA) needed to name a brand (default {vp.score_threshold})")
+    parser.add_argument("--seed", type=int, default=0, help="RANSAC seed (default 0)")
+    parser.add_argument("--json", action="store_true", help="print a JSON list, one record per scene")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.max_features < 1:
+        raise InputError(f"`--max-features` must be a positive integer, got {args.max_features}")
+    try:
+        mp = LogoMatchParams(ratio=args.ratio)
+        vp = LogoVerifyParams(score_threshold=args.threshold)
+    except ValueError as exc:
+        raise InputError(str(exc).replace("`ratio`", "`--ratio`")) from exc
+    gallery = load_gallery(args.gallery, args.method, args.max_features, mp.min_features)
+    records, failed = [], 0
+    for scene in args.scenes:
+        try:
+            gray = io.read_image(scene, "gray")
+            det = logos.recognize(gallery, detect(gray, args.method, args.max_features),
+                                  (gray.shape[1], gray.shape[0]), mp, vp, args.seed)
+            records.append(detection_json(scene, det))
+        except CvpipeError as exc:
+            # one bad scene must not cost the answers for the others
+            failed += 1
+            print(f"cvpipe: error: {exc}", file=sys.stderr)
+            records.append({"scene": scene, "brand": None, "inliers": 0, "score": None, "quad": None,
+                            "error": str(exc)})
+    if args.json:
+        print(io.dumps_json(records))
+    else:
+        for r in records:
+            if "error" in r:
+                print(f"{r['scene']}: error")
+            elif r["brand"] is None:
+                print(f"{r['scene']}: none")
+            else:
+                print(f"{r['scene']}: {r['brand']} (score {r['score']}, {r['inliers']} inliers)")
+    return 2 if failed else 0

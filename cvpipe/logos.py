@@ -1,0 +1,704 @@
+"""Logo recognition: which gallery brand is in a scene photo, and where.
+
+A gallery holds one or more reference images per brand. Their descriptors are stacked into one index that is built
+once; every scene descriptor is matched against the whole gallery in one k-nearest-neighbour query, and Lowe's
+ratio test compares the best neighbour of a brand with the best neighbour of any *other* brand (so several
+reference photos of the same brand do not reject each other's matches). Each reference with enough tentative
+matches is verified by a RANSAC homography (:func:`cvpipe.homography.find_homography`) and plausibility checks on
+it: the projected reference outline must be convex and not mirrored, of sane area relative to the scene, without
+extreme anisotropy or perspective, and the inliers must cover a fair part of the reference.
+
+The score is an a-contrario significance, ``-log10`` of the expected number of equally good chance fits: the
+binomial tail of seeing ``inliers - 4`` of the ``matches - 4`` other matches land within the RANSAC threshold of
+their prediction when they are spread at random over the scene, multiplied by the number of 4-point hypotheses and
+of references tried. Unlike a raw inlier count, it does not grow with the number of
+tentative matches that a cluttered scene or a feature-rich reference produces, so it is comparable across brands
+and separates true logos from the 6-10 inlier fits that RANSAC finds on any busy photo.
+
+The module takes arrays only; reading the gallery folder lives in the command, stage and benchmark code.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import cv2
+import numpy as np
+from scipy.special import gammaln
+from scipy.stats import binom
+
+from .errors import EstimationError, InputError
+from .features import DETECTORS, Features, check_detector
+from .homography import find_homography
+from .params import LogoMatchParams, LogoVerifyParams
+
+_FLANN_KDTREE = 1
+
+
+@dataclass(frozen=True)
+class Reference:
+    """One gallery image of a brand.
+
+    Attributes
+    ----------
+    brand : str
+        Brand name (the gallery file or folder name).
+    name : str
+        Where the image came from (file name), used in messages.
+    features : Features
+        Its keypoints and descriptors (positions in reference pixels).
+    size : tuple of int
+        (width, height) of the reference image in pixels.
+    box : tuple of float, optional
+        ``(x1, y1, x2, y2)`` corner pixel centres of the logo inside the reference image, when the reference is a
+        whole photo with the logo boxed (features then come from inside the box, detected with the photo around
+        it so that descriptors near the box edge see real context). Default: the whole image.
+    """
+
+    brand: str
+    name: str
+    features: Features
+    size: tuple[int, int]
+    box: tuple[float, float, float, float] | None = None
+
+    @property
+    def outline(self) -> np.ndarray:
+        """(4, 2) logo outline in reference pixels, clockwise from the top-left."""
+        if self.box is None:
+            return outline(self.size)
+        x1, y1, x2, y2 = self.box
+        return np.array([[x1, y1], [x2, y1], [x2, y2], [x1, y2]], np.float64)
+
+    @property
+    def area(self) -> float:
+        """Area of the logo outline, px^2."""
+        q = self.outline
+        return float((q[1, 0] - q[0, 0]) * (q[2, 1] - q[1, 1]))
+
+
+@dataclass(frozen=True, eq=False)
+class Gallery:
+    """The indexed gallery: stacked descriptors of every usable reference and a matcher trained on them.
+
+    Attributes
+    ----------
+    detector : str
+        Detector of every reference (scenes must use the same one).
+    brands : tuple of str
+        Sorted brand names.
+    references : tuple of Reference
+        Usable references (at least ``min_features`` keypoints).
+    dropped : tuple of str
+        Names of references left out for having too few keypoints.
+    ref_of : (M,) int64
+        Reference index of every stacked descriptor.
+    local_of : (M,) int64
+        Keypoint index inside its reference of every stacked descriptor.
+    brand_of_ref : (R,) int64
+        Index into ``brands`` of every reference.
+    """
+
+    detector: str
+    brands: tuple[str, ...]
+    references: tuple[Reference, ...]
+    dropped: tuple[str, ...]
+    ref_of: np.ndarray
+    local_of: np.ndarray
+    brand_of_ref: np.ndarray
+    matcher: cv2.DescriptorMatcher = field(repr=False)
+
+    @property
+    def binary(self) -> bool:
+        return DETECTORS[self.detector][1]
+
+
+@dataclass(frozen=True)
+class Matches:
+    """Tentative scene -> gallery matches of one scene.
+
+    Attributes
+    ----------
+    ref : (M,) int64
+        Reference index of each match.
+    gallery_idx : (M,) int64
+        Keypoint index inside that reference.
+    scene_idx : (M,) int64
+        Scene keypoint index.
+    distance : (M,) float32
+        Descriptor distance.
+    """
+
+    ref: np.ndarray
+    gallery_idx: np.ndarray
+    scene_idx: np.ndarray
+    distance: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.ref)
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        return {"ref": self.ref, "gallery_idx": self.gallery_idx, "scene_idx": self.scene_idx,
+                "distance": self.distance}
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray]) -> "Matches":
+        return cls(np.asarray(arrays["ref"], np.int64), np.asarray(arrays["gallery_idx"], np.int64),
+                   np.asarray(arrays["scene_idx"], np.int64), np.asarray(arrays["distance"], np.float32))
+
+
+@dataclass(frozen=True)
+class Hypothesis:
+    """The verified (or rejected) homography of one reference in one scene.
+
+    Attributes
+    ----------
+    brand : str
+    reference : int
+        Index into ``Gallery.references``.
+    matches : int
+        Tentative matches of this reference (after one-to-one filtering).
+    inliers : int
+        RANSAC inliers (0 when no homography could be fitted).
+    score : float
+        ``-log10`` NFA (see the module docstring); ``-inf`` when rejected.
+    H : (3, 3) float64 or None
+        Reference pixels -> scene pixels.
+    quad : (4, 2) float64 or None
+        Reference outline (corner pixel centres, clockwise from top-left) in scene pixels.
+    pairs : (K, 2) int64
+        Inlier ``[reference keypoint, scene keypoint]`` index pairs.
+    reason : str
+        Why the hypothesis was rejected, empty when it passed every check.
+    """
+
+    brand: str
+    reference: int
+    matches: int
+    inliers: int
+    score: float
+    H: np.ndarray | None
+    quad: np.ndarray | None
+    pairs: np.ndarray
+    reason: str = ""
+
+    @property
+    def plausible(self) -> bool:
+        return not self.reason
+
+
+@dataclass(frozen=True)
+class Detection:
+    """The answer for one scene.
+
+    Attributes
+    ----------
+    brand : str or None
+        The recognised brand, None when no plausible hypothesis reaches the score threshold.
+    score : float
+        Score of the best plausible hypothesis (``-inf`` when there is none); compare with the threshold.
+    inliers : int
+        Its inlier count (0 when there is none).
+    quad : (4, 2) float64 or None
+        The logo outline in scene pixels when ``brand`` is not None.
+    best : Hypothesis or None
+        The best plausible hypothesis even when it is below the threshold (for precision-recall curves).
+    hypotheses : list of Hypothesis
+        Every reference that was verified, plausible or not.
+    """
+
+    brand: str | None
+    score: float
+    inliers: int
+    quad: np.ndarray | None
+    best: Hypothesis | None
+    hypotheses: list[Hypothesis]
+
+
+# ------------------------------------------------------------------------------------------------ the gallery
+
+
+def _prepare(desc: np.ndarray, binary: bool) -> np.ndarray:
+    """RootSIFT for float descriptors (L1 normalise, square root): Hellinger instead of Euclidean distance, which
+    matches SIFT histograms better; binary descriptors pass through."""
+    if binary:
+        return np.ascontiguousarray(desc, np.uint8)
+    d = np.asarray(desc, np.float32)
+    d = d / (np.abs(d).sum(axis=1, keepdims=True) + 1e-7)
+    return np.ascontiguousarray(np.sqrt(np.maximum(d, 0)), np.float32)
+
+
+def build_gallery(references: Sequence[Reference], min_features: int = 8) -> Gallery:
+    """Index the references of every brand once.
+
+    Parameters
+    ----------
+    references : sequence of Reference
+        At least one; all from the same detector.
+    min_features : int
+        References with fewer keypoints are dropped (listed in ``Gallery.dropped``): they cannot support a
+        verified homography.
+
+    Raises
+    ------
+    InputError
+        Empty gallery, or no reference with at least ``min_features`` keypoints (the message names the files).
+    ValueError
+        Mixed detectors or a bad ``min_features``.
+    """
+    if not isinstance(min_features, (int, np.integer)) or min_features < 4:
+        raise ValueError(f"`min_features` must be an integer >= 4, got {min_features!r}")
+    refs = list(references)
+    if not refs:
+        raise InputError("the gallery is empty: expected DIR/<brand>.<ext> or DIR/<brand>/*.<ext> images")
+    detectors = sorted({r.features.detector for r in refs})
+    if len(detectors) > 1:
+        raise ValueError(f"gallery references must share one detector, got {detectors}")
+    detector = detectors[0]
+    check_detector(detector)
+    for r in refs:
+        if len(r.size) != 2 or min(r.size) < 1:
+            raise ValueError(f"`size` of reference {r.name} must be (width, height) >= 1, got {r.size}")
+        if r.box is not None:
+            x1, y1, x2, y2 = r.box
+            if not (0 <= x1 < x2 <= r.size[0] - 1 and 0 <= y1 < y2 <= r.size[1] - 1):
+                raise ValueError(f"`box` of reference {r.name} must lie inside its {r.size[0]}x{r.size[1]} image "
+                                 f"with x1 < x2 and y1 < y2, got {r.box}")
+    usable = [r for r in refs if len(r.features) >= min_features]
+    dropped = tuple(r.name for r in refs if len(r.features) < min_features)
+    if not usable:
+        names = ", ".join(f"{r.name} ({len(r.features)})" for r in refs)
+        raise InputError(f"no gallery image yields at least {min_features} keypoints with {detector}: {names}")
+    brands = tuple(sorted({r.brand for r in usable}))
+    binary = DETECTORS[detector][1]
+    desc = np.concatenate([_prepare(r.features.descriptors, binary) for r in usable])
+    ref_of = np.concatenate([np.full(len(r.features), i, np.int64) for i, r in enumerate(usable)])
+    local_of = np.concatenate([np.arange(len(r.features), dtype=np.int64) for r in usable])
+    if binary:
+        matcher = cv2.BFMatcher(cv2.NORM_HAMMING)
+    else:
+        matcher = cv2.FlannBasedMatcher({"algorithm": _FLANN_KDTREE, "trees": 4}, {"checks": 64})
+    matcher.add([desc])
+    matcher.train()
+    brand_of_ref = np.array([brands.index(r.brand) for r in usable], np.int64)
+    return Gallery(detector, brands, tuple(usable), dropped, ref_of, local_of, brand_of_ref, matcher)
+
+
+# ----------------------------------------------------------------------------------------------- matching
+
+
+def match_scene(gallery: Gallery, scene: Features, params: LogoMatchParams | None = None) -> Matches:
+    """Tentative matches of a scene's keypoints to every reference.
+
+    Each scene descriptor gets its ``k`` nearest gallery descriptors. A neighbour of brand B is kept when its
+    distance is below ``ratio`` times the distance of the nearest neighbour of any other brand (or of the k-th
+    neighbour when all k belong to B), and at most the first ``per_reference`` neighbours in one reference count.
+    Afterwards every reference keypoint keeps only its closest scene keypoint.
+
+    Parameters
+    ----------
+    gallery : Gallery
+    scene : Features
+        From the same detector as the gallery.
+    params : LogoMatchParams, optional
+        ``ratio``, ``k`` and ``per_reference``; defaults from :class:`cvpipe.params.LogoMatchParams`.
+    """
+    p = params or LogoMatchParams()
+    if scene.detector != gallery.detector:
+        raise ValueError(f"scene features come from {scene.detector!r}, the gallery from {gallery.detector!r}")
+    empty = Matches(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.float32))
+    if len(scene) == 0:
+        return empty
+    k = int(min(p.k, len(gallery.ref_of)))
+    knn = gallery.matcher.knnMatch(_prepare(scene.descriptors, gallery.binary), k=k)
+    n = len(knn)
+    idx = np.full((n, k), -1, np.int64)
+    dist = np.full((n, k), np.inf, np.float32)
+    for i, row in enumerate(knn):
+        for j, m in enumerate(row):
+            idx[i, j] = m.trainIdx
+            dist[i, j] = m.distance
+    valid = idx >= 0
+    ref = np.where(valid, gallery.ref_of[np.maximum(idx, 0)], -1)
+    brand = np.where(valid, gallery.brand_of_ref[np.maximum(ref, 0)], -1)
+    # nearest distance of another brand for every neighbour: the first neighbour whose brand differs
+    other = np.full((n, k), np.inf, np.float32)
+    last = dist[np.arange(n), valid.sum(1) - 1]
+    for j in range(k):
+        differs = (brand != brand[:, j:j + 1]) & valid
+        first = np.where(differs.any(1), dist[np.arange(n), np.argmax(differs, 1)], last)
+        other[:, j] = first
+    keep = valid & (dist < p.ratio * other)
+    # at most `per_reference` neighbours in one reference: 2 keeps both twins of a symmetric mark (RANSAC picks the
+    # consistent one), where 1 would keep a random twin and halve the inliers
+    for j in range(1, k):
+        keep[:, j] &= (ref[:, :j] == ref[:, j:j + 1]).sum(1) < p.per_reference
+    rows, cols = np.nonzero(keep)
+    if len(rows) == 0:
+        return empty
+    m_ref = ref[rows, cols]
+    m_gal = gallery.local_of[idx[rows, cols]]
+    m_dist = dist[rows, cols]
+    # one-to-one per reference: keep the closest scene keypoint of every reference keypoint
+    order = np.lexsort((m_dist, m_gal, m_ref))
+    m_ref, m_gal, rows, m_dist = m_ref[order], m_gal[order], rows[order], m_dist[order]
+    first = np.ones(len(m_ref), bool)
+    first[1:] = (m_ref[1:] != m_ref[:-1]) | (m_gal[1:] != m_gal[:-1])
+    return Matches(m_ref[first], m_gal[first], rows[first].astype(np.int64), m_dist[first])
+
+
+# ------------------------------------------------------------------------------------------- verification
+
+
+def outline(size: tuple[int, int]) -> np.ndarray:
+    """(4, 2) corner pixel centres of a (width, height) image, clockwise from the top-left."""
+    w, h = size
+    return np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], np.float64)
+
+
+def project(H: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Map (N, 2) points by the 3x3 homography ``H``; raises EstimationError for points at infinity."""
+    p = np.c_[np.asarray(pts, np.float64), np.ones(len(pts))] @ np.asarray(H, np.float64).T
+    if np.any(np.abs(p[:, 2]) < 1e-12):
+        raise EstimationError("a point maps to infinity")
+    return p[:, :2] / p[:, 2:3]
+
+
+def _polygon_area(q: np.ndarray) -> float:
+    x, y = q[:, 0], q[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+def _hull_area(pts: np.ndarray) -> float:
+    if len(pts) < 3:
+        return 0.0
+    return float(cv2.contourArea(cv2.convexHull(np.asarray(pts, np.float32))))
+
+
+def shape_problem(H: np.ndarray, corners: np.ndarray, scene_size: tuple[int, int],
+                  params: LogoVerifyParams | None = None) -> str:
+    """Why the homography is not a plausible view of a flat logo, or ``""`` when it is.
+
+    Parameters
+    ----------
+    H : (3, 3)
+        Reference pixels -> scene pixels.
+    corners : (4, 2)
+        Logo outline in reference pixels, clockwise from the top-left (``Reference.outline``).
+    scene_size : (width, height)
+        Scene size in pixels.
+    params : LogoVerifyParams, optional
+        ``min_area``, ``max_area`` (outline area / scene area), ``max_anisotropy`` (ratio of the singular values
+        of the local affine map at the reference centre: shear plus aspect change), ``max_perspective`` (ratio of
+        the largest to the smallest local area scale over the four corners).
+    """
+    p = params or LogoVerifyParams()
+    corners = np.asarray(corners, np.float64)
+    w = np.c_[corners, np.ones(4)] @ np.asarray(H, np.float64)[2]
+    if np.any(w <= 1e-9):
+        return "outline crosses the horizon"
+    quad = project(H, corners)
+    edges = np.roll(quad, -1, axis=0) - quad
+    cross = edges[:, 0] * np.roll(edges, -1, axis=0)[:, 1] - edges[:, 1] * np.roll(edges, -1, axis=0)[:, 0]
+    # the reference outline turns clockwise on screen (y down) = positive cross products; negative means mirrored
+    if not np.all(cross > 0):
+        return "outline not convex or mirrored"
+    frac = _polygon_area(quad) / float(scene_size[0] * scene_size[1])
+    if not p.min_area <= frac <= p.max_area:
+        return f"outline covers {frac:.4f} of the scene, outside [{p.min_area}, {p.max_area}]"
+    c = corners.mean(axis=0)
+    hc = H @ np.r_[c, 1.0]
+    J = (H[:2, :2] * hc[2] - np.outer(hc[:2], H[2, :2])) / hc[2] ** 2
+    s = np.linalg.svd(J, compute_uv=False)
+    if s[1] <= 0 or s[0] / s[1] > p.max_anisotropy:
+        return f"anisotropy {s[0] / max(s[1], 1e-12):.1f} > {p.max_anisotropy}"
+    # local area scale of a homography is det(H) / w^3
+    persp = float((w.max() / w.min()) ** 3)
+    if persp > p.max_perspective:
+        return f"perspective area ratio {persp:.1f} > {p.max_perspective}"
+    return ""
+
+
+def significance(inliers: int, matches: int, threshold: float, area: float, n_refs: int) -> float:
+    """``-log10`` of the number of false alarms of a homography with ``inliers`` among ``matches``.
+
+    Parameters
+    ----------
+    inliers, matches : int
+        Inlier and tentative match counts of one reference.
+    threshold : float
+        RANSAC reprojection threshold, scene pixels.
+    area : float
+        Scene area (px^2) over which chance matches spread.
+    n_refs : int
+        Number of references tested in this scene (multiple tests).
+    """
+    if matches < 5 or inliers < 5:
+        return -np.inf
+    prob = min(1.0, np.pi * threshold ** 2 / max(area, 1.0))
+    n, k = matches - 4, inliers - 4
+    log_tail = binom.logsf(k - 1, n, prob)  # ln P(X >= k)
+    if not np.isfinite(log_tail):  # the tail underflows for huge inlier counts; its first term bounds it from below
+        log_tail = binom.logpmf(k, n, prob)
+    log_tail /= np.log(10)
+    log_hyp = (gammaln(matches + 1) - gammaln(5) - gammaln(matches - 3)) / np.log(10)  # log10 C(matches, 4)
+    return float(-(log_tail + log_hyp + np.log10(max(n_refs, 1))))
+
+
+def _check(brand: str, r: int, ref: Reference, H: np.ndarray, inl: np.ndarray, src: np.ndarray, dst: np.ndarray,
+           g_idx: np.ndarray, s_idx: np.ndarray, scene_size: tuple[int, int], n_tested: int,
+           p: LogoVerifyParams) -> Hypothesis:
+    """Plausibility checks and score of one fitted model (see :func:`verify`)."""
+    n_in = int(inl.sum())
+    pairs = np.c_[g_idx[inl], s_idx[inl]]
+    reason = shape_problem(H, ref.outline, scene_size, p)
+    quad = None if reason.startswith("outline crosses") else project(H, ref.outline)
+    if not reason and n_in < p.min_inliers:
+        reason = f"{n_in} inliers < {p.min_inliers}"
+    if not reason:
+        spread = _hull_area(src[inl]) / ref.area
+        if spread < p.min_spread:
+            reason = f"inliers cover {spread:.3f} of the reference < {p.min_spread}"
+    score = -np.inf
+    if not reason:
+        area = float(scene_size[0] * scene_size[1])
+        score = significance(n_in, len(src), p.ransac_threshold, area, n_tested)
+    return Hypothesis(brand, r, len(src), n_in, score, H, quad, pairs, reason)
+
+
+def verify(gallery: Gallery, matches: Matches, scene_xy: np.ndarray, scene_size: tuple[int, int],
+           params: LogoVerifyParams | None = None, rng=None) -> list[Hypothesis]:
+    """Fit and check one homography per reference that has at least ``min_matches`` tentative matches.
+
+    When the best RANSAC fit fails the checks, its inliers are set aside and the remaining matches are fitted
+    again (at most ``max_models`` fits per reference); the number of fits enters the score's multiple-test count.
+
+    Parameters
+    ----------
+    gallery : Gallery
+    matches : Matches
+        From :func:`match_scene`.
+    scene_xy : (N, 2) float
+        Scene keypoint positions, pixels.
+    scene_size : (width, height)
+        Scene size in pixels.
+    params : LogoVerifyParams, optional
+    rng : None, int or Generator
+        Seeds RANSAC.
+
+    Returns
+    -------
+    list of Hypothesis
+        One per tested reference, sorted by score (best first).
+    """
+    p = params or LogoVerifyParams()
+    rng = np.random.default_rng(rng)
+    scene_xy = np.asarray(scene_xy, np.float64)
+    refs = np.unique(matches.ref)
+    counts = {int(r): int(np.sum(matches.ref == r)) for r in refs}
+    tested = [r for r in refs if counts[int(r)] >= p.min_matches]
+    out = []
+    for r in tested:
+        ref = gallery.references[int(r)]
+        sel = matches.ref == r
+        g_idx, s_idx = matches.gallery_idx[sel], matches.scene_idx[sel]
+        src, dst = ref.features.xy[g_idx].astype(np.float64), scene_xy[s_idx]
+        brand = ref.brand
+        none = np.zeros((0, 2), np.int64)
+        hyp, left = None, np.ones(len(src), bool)
+        # sequential RANSAC: an implausible best fit (a chance fit, or a fold made by the twin matches of a
+        # symmetric mark) gives its inliers up and the rest is fitted again, up to `max_models` times
+        for attempt in range(1, p.max_models + 1):
+            if left.sum() < p.min_matches:
+                break
+            try:
+                fit = find_homography(src[left], dst[left], threshold=p.ransac_threshold, confidence=0.999,
+                                      max_iters=p.max_iters, rng=rng)
+            except EstimationError as exc:
+                if hyp is None:
+                    hyp = Hypothesis(brand, int(r), len(src), 0, -np.inf, None, None, none, f"no homography: {exc}")
+                break
+            inl = np.zeros(len(src), bool)
+            inl[np.flatnonzero(left)[np.asarray(fit.inliers, bool)]] = True
+            cand = _check(brand, int(r), ref, fit.H, inl, src, dst, g_idx, s_idx, scene_size,
+                          len(tested) * attempt, p)
+            if hyp is None or (hyp.reason and not cand.reason):
+                hyp = cand
+            if not cand.reason:
+                break
+            left &= ~inl
+        out.append(hyp)
+    out.sort(key=lambda h: (h.score, h.inliers), reverse=True)
+    return out
+
+
+def decide(hypotheses: Sequence[Hypothesis], params: LogoVerifyParams | None = None) -> Detection:
+    """The brand of the best plausible hypothesis when its score reaches ``score_threshold``, else none."""
+    p = params or LogoVerifyParams()
+    good = [h for h in hypotheses if h.plausible]
+    if not good:
+        return Detection(None, -np.inf, 0, None, None, list(hypotheses))
+    best = max(good, key=lambda h: (h.score, h.inliers))
+    if best.score >= p.score_threshold:
+        return Detection(best.brand, best.score, best.inliers, best.quad, best, list(hypotheses))
+    return Detection(None, best.score, best.inliers, None, best, list(hypotheses))
+
+
+def recognize(gallery: Gallery, scene: Features, scene_size: tuple[int, int],
+              match_params: LogoMatchParams | None = None, verify_params: LogoVerifyParams | None = None,
+              rng=None) -> Detection:
+    """Match, verify and decide for one scene (see the module docstring).
+
+    Parameters
+    ----------
+    gallery : Gallery
+    scene : Features
+        Scene keypoints from the gallery's detector.
+    scene_size : (width, height)
+        Scene size in pixels.
+    """
+    if len(scene_size) != 2 or min(scene_size) < 1:
+        raise ValueError(f"`scene_size` must be (width, height) >= 1, got {scene_size}")
+    m = match_scene(gallery, scene, match_params)
+    return decide(verify(gallery, m, scene.xy, scene_size, verify_params, rng), verify_params)
+
+
+# ------------------------------------------------------------------------------------------------- evaluation
+
+
+def evaluate(truth: Sequence[str | None], predicted: Sequence[str | None], scores: Sequence[float],
+             threshold: float) -> dict:
+    """Precision, recall and accuracy of brand decisions, and the precision-recall curve over the threshold.
+
+    Parameters
+    ----------
+    truth : sequence of str or None
+        True brand per scene (None = no gallery logo).
+    predicted : sequence of str or None
+        Brand of the best plausible hypothesis per scene, *before* thresholding (None when there is none).
+    scores : sequence of float
+        Its score (``-inf`` when there is none).
+    threshold : float
+        The decision threshold (``score_threshold``).
+
+    Returns
+    -------
+    dict
+        ``precision`` (correct brand / scenes answered with a brand; 1.0 when nothing is answered), ``recall``
+        (correct brand / scenes with a logo), ``accuracy`` (correct brand or correct none / all scenes), the counts,
+        and ``curve``: a list of ``{"threshold", "precision", "recall"}`` at every distinct score.
+    """
+    if not (len(truth) == len(predicted) == len(scores)):
+        raise ValueError(f"`truth`, `predicted` and `scores` must have equal lengths, got "
+                         f"{len(truth)}, {len(predicted)}, {len(scores)}")
+    s = np.asarray(scores, np.float64)
+    correct = np.array([p is not None and p == t for p, t in zip(predicted, truth)])
+    has = np.array([p is not None for p in predicted])
+    positives = int(sum(t is not None for t in truth))
+    negatives_truth = np.array([t is None for t in truth])
+
+    def at(th: float) -> dict:
+        answered = has & (s >= th)
+        tp = int(np.sum(answered & correct))
+        n_ans = int(answered.sum())
+        right_none = int(np.sum(~answered & negatives_truth))
+        return {"threshold": float(th), "answered": n_ans, "correct": tp,
+                "precision": tp / n_ans if n_ans else 1.0,
+                "recall": tp / positives if positives else 0.0,
+                "accuracy": (tp + right_none) / len(truth) if len(truth) else 0.0}
+
+    finite = sorted({float(v) for v in s[np.isfinite(s)]}, reverse=True)
+    curve = [{k: v for k, v in at(t).items() if k in ("threshold", "precision", "recall")} for t in finite]
+    result = at(threshold)
+    result.update({"scenes": len(truth), "positives": positives, "curve": curve})
+    return result
+
+
+def quad_error(quad: np.ndarray | None, truth: np.ndarray | Sequence | None, cyclic: bool = False) -> float | None:
+    """Mean distance in pixels between corresponding corners of two (4, 2) quads (None when either is None).
+
+    With ``cyclic`` the smallest error over the four starting corners of ``quad``: the outline of a mark with
+    rotational symmetry (or of a gallery view stored rotated) may legitimately start at another corner.
+    """
+    if quad is None or truth is None:
+        return None
+    q, t = np.asarray(quad, np.float64), np.asarray(truth, np.float64)
+    if q.shape != (4, 2) or t.shape != (4, 2):
+        raise ValueError(f"quads must be (4, 2), got {q.shape} and {t.shape}")
+    shifts = range(4) if cyclic else range(1)
+    return float(min(np.linalg.norm(np.roll(q, i, axis=0) - t, axis=1).mean() for i in shifts))
+
+
+# --------------------------------------------------------------------------------------------------- pictures
+
+
+def confusion(truth: Sequence[str | None], predicted: Sequence[str | None],
+              labels: Sequence[str]) -> np.ndarray:
+    """(L+1, L+1) int counts, rows = truth, columns = decision, over ``labels`` plus a last "none" class."""
+    index = {b: i for i, b in enumerate(labels)}
+    none = len(labels)
+    m = np.zeros((none + 1, none + 1), np.int64)
+    for t, p in zip(truth, predicted):
+        m[index.get(t, none) if t is not None else none, index.get(p, none) if p is not None else none] += 1
+    return m
+
+
+def draw_confusion(matrix: np.ndarray, labels: Sequence[str], title: str, cell: int = 34) -> np.ndarray:
+    """A confusion matrix as a BGR picture: rows = truth, columns = decision, darker = more scenes."""
+    names = list(labels) + ["none"]
+    n = len(names)
+    if matrix.shape != (n, n):
+        raise ValueError(f"`matrix` must be ({n}, {n}) for {n - 1} labels plus none, got {matrix.shape}")
+    left, top = 120, 130
+    img = np.full((top + n * cell + 10, left + n * cell + 10, 3), 255, np.uint8)
+    font = cv2.FONT_HERSHEY_SIMPLEX
+    cv2.putText(img, title, (8, 20), font, 0.55, (0, 0, 0), 1, cv2.LINE_AA)
+    row_sum = np.maximum(matrix.sum(axis=1, keepdims=True), 1)
+    for i in range(n):
+        cv2.putText(img, names[i][:14], (6, top + i * cell + cell // 2 + 5), font, 0.42, (0, 0, 0), 1, cv2.LINE_AA)
+        label = np.full((cell, top - 30, 3), 255, np.uint8)
+        cv2.putText(label, names[i][:14], (2, cell // 2 + 5), font, 0.42, (0, 0, 0), 1, cv2.LINE_AA)
+        rot = cv2.rotate(label, cv2.ROTATE_90_COUNTERCLOCKWISE)
+        img[30:30 + rot.shape[0], left + i * cell:left + i * cell + rot.shape[1]] = rot
+        for j in range(n):
+            v = int(matrix[i, j])
+            shade = int(255 - 200 * v / row_sum[i, 0])
+            color = (shade, 255, shade) if i == j else (shade, shade, 255)
+            x0, y0 = left + j * cell, top + i * cell
+            cv2.rectangle(img, (x0, y0), (x0 + cell - 1, y0 + cell - 1), color, -1)
+            cv2.rectangle(img, (x0, y0), (x0 + cell - 1, y0 + cell - 1), (200, 200, 200), 1)
+            if v:
+                cv2.putText(img, str(v), (x0 + 6, y0 + cell // 2 + 5), font, 0.45, (0, 0, 0), 1, cv2.LINE_AA)
+    return img
+
+
+def draw_detection(scene: np.ndarray, reference: np.ndarray, quad: np.ndarray | None,
+                   gallery_xy: np.ndarray, scene_xy: np.ndarray, truth_quad: np.ndarray | None = None,
+                   caption: str = "", height: int = 360) -> np.ndarray:
+    """Reference beside scene (both scaled to ``height`` px): inlier matches as lines, the found outline in green,
+    the true outline (when given) in blue, ``caption`` on top. BGR uint8 in, BGR uint8 out."""
+    scene, reference = _bgr(scene), _bgr(reference)
+    sr, ss = height / reference.shape[0], height / scene.shape[0]
+    ref_s = cv2.resize(reference, (max(1, int(round(reference.shape[1] * sr))), height))
+    sc_s = cv2.resize(scene, (max(1, int(round(scene.shape[1] * ss))), height))
+    canvas = np.full((height + 26, ref_s.shape[1] + sc_s.shape[1] + 6, 3), 255, np.uint8)
+    canvas[26:, :ref_s.shape[1]] = ref_s
+    off = ref_s.shape[1] + 6
+    canvas[26:, off:] = sc_s
+    for (gx, gy), (sx, sy) in zip(np.asarray(gallery_xy), np.asarray(scene_xy)):
+        p1 = (int(round(gx * sr)), int(round(gy * sr)) + 26)
+        p2 = (int(round(sx * ss)) + off, int(round(sy * ss)) + 26)
+        cv2.line(canvas, p1, p2, (0, 200, 255), 1, cv2.LINE_AA)
+        cv2.circle(canvas, p2, 2, (0, 200, 255), -1, cv2.LINE_AA)
+    for q, color in ((truth_quad, (255, 80, 0)), (quad, (0, 200, 0))):
+        if q is not None:
+            pts = np.round(np.asarray(q, np.float64) * ss + [off, 26]).astype(np.int32)
+            cv2.polylines(canvas, [pts], True, color, 2, cv2.LINE_AA)
+    cv2.putText(canvas, caption, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 1, cv2.LINE_AA)
+    return canvas
+
+
+def _bgr(img: np.ndarray) -> np.ndarray:
+    if img.ndim == 2:
+        return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+    return img[..., :3]
