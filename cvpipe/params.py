@@ -13,7 +13,7 @@ import types
 import typing
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Literal, TypeVar
 
 import yaml
 
@@ -518,4 +518,86 @@ SECTIONS.update({
     "logo.features": FeaturesParams,
     "logo.match": LogoMatchParams,
     "logo.verify": LogoVerifyParams,
+})
+
+
+# ---- stereo ----
+# One section per compared method, so that `dvc repro` reruns only the method whose parameters changed (the
+# `stereo_disparity` matrix stage reads `stereo.<method>`); the defaults equal the function defaults in
+# cvpipe.stereo (a test checks that).
+
+
+@dataclass(frozen=True)
+class StereoSgmParams:
+    """``stereo.sgm``: our semi-global matching (:func:`cvpipe.stereo.disparity_sgm`)."""
+
+    census_size: tuple[int, int] = (5, 7)
+    ad_weight: float = 0.5
+    ad_trunc: int = 20
+    paths: int = 8
+    p1: int = 15
+    p2: int = 150
+    p2_tau: float = 16.0
+    uniqueness: float = 0.0
+    subpixel: bool = True
+    lr_max_diff: float = 2.0
+    speckle_size: int = 100
+    speckle_range: float = 2.0
+    fill: bool = False
+
+    def __post_init__(self):
+        _in_range("paths", self.paths, 4, 8)
+        _in_range("p1", self.p1, 1, 4095)
+        _in_range("p2", self.p2, self.p1 + 1, 4096)
+        _in_range("ad_weight", self.ad_weight, 0.0)
+        _in_range("ad_trunc", self.ad_trunc, 1, 255)
+        _in_range("p2_tau", self.p2_tau, 0.0)
+        _in_range("uniqueness", self.uniqueness, 0.0, 0.99)
+        _in_range("speckle_size", self.speckle_size, 0)
+        _in_range("speckle_range", self.speckle_range, 0.0)
+
+
+@dataclass(frozen=True)
+class StereoBmParams:
+    """``stereo.opencv_bm``: OpenCV block matching (:func:`cvpipe.stereo.disparity_opencv_bm`)."""
+
+    block_size: int = 15
+    uniqueness: int = 15
+    speckle_size: int = 100
+    speckle_range: int = 2
+
+    def __post_init__(self):
+        _in_range("block_size", self.block_size, 5, 255)
+
+
+@dataclass(frozen=True)
+class StereoSgbmParams:
+    """``stereo.opencv_sgbm``: OpenCV semi-global block matching (:func:`cvpipe.stereo.disparity_opencv_sgbm`)."""
+
+    mode: Literal["sgbm", "hh", "sgbm_3way", "hh4"] = "sgbm"
+    block_size: int = 3
+    uniqueness: int = 10
+    speckle_size: int = 100
+    speckle_range: int = 2
+    lr_max_diff: int = 1
+
+    def __post_init__(self):
+        _in_range("block_size", self.block_size, 1, 11)
+
+
+@dataclass(frozen=True)
+class StereoReportParams:
+    """``stereo.report``: the absolute error (pixels) at which the error maps' colour saturates."""
+
+    error_clip: float = 4.0
+
+    def __post_init__(self):
+        _in_range("error_clip", self.error_clip, 0.0, lo_open=True)
+
+
+SECTIONS.update({
+    "stereo.sgm": StereoSgmParams,
+    "stereo.opencv_bm": StereoBmParams,
+    "stereo.opencv_sgbm": StereoSgbmParams,
+    "stereo.report": StereoReportParams,
 })
