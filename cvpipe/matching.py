@@ -18,6 +18,55 @@ def _knn(query: np.ndarray, train: np.ndarray, binary: bool, k: int) -> list:
     return flann.knnMatch(np.ascontiguousarray(query, np.float32), np.ascontiguousarray(train, np.float32), k=k)
 
 
+class MatchIndex:
+    """A nearest-neighbour index over one image's descriptors, built once and queried by many partners.
+
+    ``MatchIndex(desc_b).query(desc_a, ratio)`` returns what ``match(desc_a, desc_b, ratio)`` returns (without the
+    cross check), but the FLANN KD-trees of ``desc_b`` are built only once however many images are matched to it.
+
+    Parameters
+    ----------
+    desc : (N, D) float32 or uint8
+        The train descriptors; uint8 means binary (Hamming distance) unless ``binary`` says otherwise.
+    binary : bool, optional
+        Force Hamming (True) or L2 (False) distance; default from the dtype.
+    """
+
+    def __init__(self, desc: np.ndarray, binary: bool | None = None):
+        desc = np.asarray(desc)
+        if desc.ndim != 2:
+            raise ValueError(f"`desc` must be 2-D, got shape {desc.shape}")
+        self.binary = bool(desc.dtype == np.uint8) if binary is None else bool(binary)
+        self.desc = desc
+        self._flann = None
+        if not self.binary and len(desc) >= 32:
+            self.desc = np.ascontiguousarray(desc, np.float32)
+            self._flann = cv2.FlannBasedMatcher({"algorithm": _FLANN_KDTREE, "trees": 4}, {"checks": 64})
+            self._flann.add([self.desc])
+            self._flann.train()
+
+    def __len__(self) -> int:
+        return len(self.desc)
+
+    def query(self, desc_a: np.ndarray, ratio: float = 0.8) -> np.ndarray:
+        """Match ``desc_a`` (Na, D) against the index: (M, 2) int64 pairs ``[i_a, i_index]`` passing the ratio
+        test, sorted by descriptor distance (best first)."""
+        if not 0.0 < float(ratio) <= 1.0:
+            raise ValueError(f"`ratio` must be in (0, 1], got {ratio}")
+        desc_a = np.asarray(desc_a)
+        if desc_a.ndim != 2 or desc_a.shape[1] != self.desc.shape[1]:
+            raise ValueError(f"`desc_a` must be 2-D with width {self.desc.shape[1]}, got shape {desc_a.shape}")
+        if len(desc_a) == 0 or len(self.desc) == 0:
+            return np.zeros((0, 2), np.int64)
+        k = 2 if len(self.desc) >= 2 else 1
+        if self._flann is not None:
+            knn = self._flann.knnMatch(np.ascontiguousarray(desc_a, np.float32), k=k)
+        else:
+            knn = _knn(desc_a, self.desc, self.binary, k)
+        pairs, dists = _ratio_pairs(knn, ratio)
+        return pairs[np.argsort(dists, kind="stable")]
+
+
 def _ratio_pairs(knn: list, ratio: float) -> tuple[np.ndarray, np.ndarray]:
     """(query index, train index) pairs and distances that pass the ratio test."""
     pairs, dists = [], []

@@ -38,7 +38,7 @@ from . import blending, warping
 from .errors import EstimationError, InputError
 from .features import Features, detect
 from .homography import find_homography
-from .matching import match
+from .matching import MatchIndex, match
 from .params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
                      PanoramaWarpParams)
 
@@ -310,10 +310,17 @@ def match_graph(feats: Sequence[Features], sizes: Sequence[tuple[int, int]], *, 
         else:
             edges[(i, j)] = Edge(i, j, fit.H / fit.H[2, 2], src[fit.inliers], dst[fit.inliers], conf)
 
+    # one FLANN index per image, built once and queried by each of its partners (not once per pair)
+    index: dict[int, MatchIndex] = {}
+
     def full_match(ij):
-        return match(feats[ij[0]].descriptors, feats[ij[1]].descriptors, ratio=ratio)
+        if ij[1] not in index:
+            index[ij[1]] = MatchIndex(feats[ij[1]].descriptors)
+        return index[ij[1]].query(feats[ij[0]].descriptors, ratio=ratio)
 
     with ThreadPoolExecutor(_workers()) as pool:  # OpenCV's matchers release the GIL
+        trains = sorted({j for _, j in todo})
+        index.update(zip(trains, pool.map(lambda j: MatchIndex(feats[j].descriptors), trains)))
         for (i, j), pairs in zip(todo, pool.map(full_match, todo)):
             verify(i, j, pairs)
     # the prefilter may miss the only link between two groups: try the skipped pairs that would join two
