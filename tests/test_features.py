@@ -75,3 +75,38 @@ def test_match_validation_and_edge_cases():
     # identical descriptors: every point matches itself with distance 0 (ratio 1 keeps nearest neighbours)
     idx = matching.match(a, a, ratio=1.0, cross_check=True)
     assert np.array_equal(np.sort(idx[:, 0]), np.arange(20)) and np.all(idx[:, 0] == idx[:, 1])
+
+
+@pytest.mark.parametrize("detector", ["sift", "orb"])
+def test_match_index_gives_the_same_matches_as_match(pair, detector):
+    # one prebuilt index queried by a partner must agree with a fresh match (same search, same ratio test): the
+    # panorama relies on it to build each image's index only once. Hamming brute force is exact, so ORB agrees
+    # exactly; FLANN's KD-trees are randomised per build, so for SIFT a few approximate neighbours may differ
+    a, b = pair
+    fa, fb = features.detect(a, detector, 1500), features.detect(b, detector, 1500)
+    index = matching.MatchIndex(fb.descriptors)
+    assert len(index) == len(fb) and index.binary == fb.binary
+    for ratio in (0.7, 0.8):
+        got = index.query(fa.descriptors, ratio=ratio)
+        ref = matching.match(fa.descriptors, fb.descriptors, ratio=ratio)
+        if fb.binary:
+            assert np.array_equal(got, ref)
+        else:
+            common = len({tuple(p) for p in got} & {tuple(p) for p in ref})
+            assert common >= 0.97 * max(len(got), len(ref)) and len(ref) >= 50
+
+
+def test_match_index_validation_and_edge_cases():
+    a = np.random.default_rng(0).random((40, 128), dtype=np.float32)
+    with pytest.raises(ValueError, match=r"`desc` must be 2-D"):
+        matching.MatchIndex(a[0])
+    index = matching.MatchIndex(a)
+    with pytest.raises(ValueError, match=r"`ratio` must be in \(0, 1\], got 0"):
+        index.query(a, ratio=0)
+    with pytest.raises(ValueError, match=r"`desc_a` must be 2-D with width 128"):
+        index.query(a[:, :64])
+    assert index.query(a[:0]).shape == (0, 2)
+    assert matching.MatchIndex(a[:0]).query(a).shape == (0, 2)
+    # fewer than 32 train descriptors: brute force, still every point finds itself
+    idx = matching.MatchIndex(a[:10]).query(a[:10], ratio=1.0)
+    assert np.array_equal(np.sort(idx[:, 0]), np.arange(10)) and np.all(idx[:, 0] == idx[:, 1])
