@@ -26,7 +26,6 @@ from ..errors import CvpipeError, InputError
 from ..features import detect
 from ..matching import match
 from ..metrics import DetectionCounts, match_boxes
-from ..params import DefectRegionParams
 
 HELP = "defect inspection on DeepPCB pairs warped by random homographies (ours vs the seed's plain difference)"
 EXAMPLE = "cvpipe bench defect --data ../shared/data --limit 20"

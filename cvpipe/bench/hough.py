@@ -13,9 +13,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import subprocess
-import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -24,6 +21,7 @@ import numpy as np
 from tqdm import tqdm
 
 from .. import hough, io
+from . import fresh_cache_output
 from ..errors import InputError
 from ..params import HoughEdgesParams, HoughLinesParams
 
@@ -68,12 +66,7 @@ def _gt_segments(path: Path) -> np.ndarray:
 
 def _compile_seconds() -> dict:
     """Compile times of the numba kernels in a fresh interpreter with an empty cache."""
-    with tempfile.TemporaryDirectory() as cache:
-        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
-        root = str(Path(__file__).resolve().parents[2])
-        env["PYTHONPATH"] = os.pathsep.join([root, env.get("PYTHONPATH", "")])
-        out = subprocess.run([sys.executable, "-c", _COMPILE_SNIPPET], env=env, capture_output=True, text=True,
-                             check=True).stdout.split()
+    out = fresh_cache_output(_COMPILE_SNIPPET)
     return {"standard_compile_s": float(out[0]), "probabilistic_compile_s": float(out[1]),
             "import_s": float(out[2])}
 

@@ -18,9 +18,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
-import subprocess
-import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -29,6 +26,7 @@ import numpy as np
 from tqdm import tqdm
 
 from .. import io, stereo
+from . import fresh_cache_output
 from ..errors import InputError
 from ..params import StereoBmParams, StereoSgmParams
 
@@ -99,12 +97,7 @@ def disparity_range(truth: np.ndarray) -> int:
 
 def _compile_seconds() -> dict:
     """Compile time of the numba kernels in a fresh interpreter with an empty cache."""
-    with tempfile.TemporaryDirectory() as cache:
-        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
-        root = str(Path(__file__).resolve().parents[2])
-        env["PYTHONPATH"] = os.pathsep.join([root, env.get("PYTHONPATH", "")])
-        out = subprocess.run([sys.executable, "-c", _COMPILE_SNIPPET], env=env, capture_output=True, text=True,
-                             check=True).stdout.split()
+    out = fresh_cache_output(_COMPILE_SNIPPET)
     return {"compile_s": float(out[0]), "import_s": float(out[1])}
 
 
