@@ -31,12 +31,12 @@ from typing import Sequence
 import cv2
 import numpy as np
 from scipy.sparse import coo_matrix
-from numba import njit
 from scipy.spatial.transform import Rotation
 
 from . import blending, warping
 from .errors import EstimationError, InputError
 from .features import Features, detect
+from .homography import _cholesky_solve as spd_solve_kernel
 from .homography import find_homography
 from .matching import MatchIndex, match
 from .params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
@@ -561,44 +561,14 @@ def _solve(blocks: list, homs, x0: np.ndarray, columns, T: dict | None = None,
     return x
 
 
-@njit(cache=True)
-def _cholesky_solve_kernel(A, b):
-    n = A.shape[0]
-    L = np.zeros_like(A)
-    for j in range(n):
-        s = A[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if s <= 0.0:
-            return np.full(n, np.nan)
-        L[j, j] = np.sqrt(s)
-        for i in range(j + 1, n):
-            s = A[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            L[i, j] = s / L[j, j]
-    y = np.zeros(n)
-    for i in range(n):
-        s = b[i]
-        for k in range(i):
-            s -= L[i, k] * y[k]
-        y[i] = s / L[i, i]
-    x = np.zeros(n)
-    for i in range(n - 1, -1, -1):
-        s = y[i]
-        for k in range(i + 1, n):
-            s -= L[k, i] * x[k]
-        x[i] = s / L[i, i]
-    return x
-
-
 def _cholesky_solve(A: np.ndarray, b: np.ndarray) -> np.ndarray | None:
     """Solve the symmetric positive definite system ``A x = b`` single-threaded (numba); None when not SPD.
 
     The systems are small (8 parameters per image); a threaded LAPACK call costs more in thread start-up than in
     arithmetic on a busy machine."""
-    x = _cholesky_solve_kernel(np.ascontiguousarray(A, np.float64), np.ascontiguousarray(b, np.float64))
-    return None if not np.all(np.isfinite(x)) else x
+    x = np.empty(len(b))
+    ok = spd_solve_kernel(np.ascontiguousarray(A, np.float64), np.ascontiguousarray(b, np.float64), x)
+    return x if ok and np.all(np.isfinite(x)) else None
 
 
 def levenberg_marquardt(fun, jac, x0: np.ndarray, max_iter: int = 30, ftol: float = 1e-7) -> np.ndarray:
