@@ -20,6 +20,7 @@ The module takes arrays only; reading the gallery folder lives in the command, s
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 from typing import Sequence
 
@@ -419,6 +420,78 @@ def shape_problem(H: np.ndarray, corners: np.ndarray, scene_size: tuple[int, int
     return ""
 
 
+def fit_affine(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """Least-squares affine map (3, 3), last row ``[0, 0, 1]``, from (N, 2) ``src`` to (N, 2) ``dst``, N >= 3."""
+    X = np.c_[np.asarray(src, np.float64), np.ones(len(src))]
+    M, *_ = np.linalg.lstsq(X, np.asarray(dst, np.float64), rcond=None)
+    return np.r_[M.T, [[0.0, 0.0, 1.0]]]
+
+
+def affine_ransac(src: np.ndarray, dst: np.ndarray, threshold: float, hypotheses: int = 500,
+                  rng=None) -> tuple[np.ndarray, np.ndarray]:
+    """Robust affine map from putative correspondences: RANSAC over 3-point samples, evaluated all at once.
+
+    A logo that covers a small part of the scene is seen almost affinely, and an affine map cannot fold the
+    outline over the horizon, so it finds the right model among few, noisy matches where a free homography fits a
+    chance configuration with a couple more inliers.
+
+    Parameters
+    ----------
+    src, dst : (N, 2) float
+        Reference and scene points, pixels; N >= 3.
+    threshold : float
+        Inlier distance in scene pixels.
+    hypotheses : int
+        3-point samples drawn (all triples when there are fewer).
+    rng : None, int or Generator
+
+    Returns
+    -------
+    A : (3, 3) float64
+        Reference -> scene, refitted by least squares on the inliers (a few rounds).
+    inliers : (N,) bool
+
+    Raises
+    ------
+    EstimationError
+        Fewer than 3 correspondences or every sample degenerate (collinear).
+    """
+    src, dst = np.asarray(src, np.float64), np.asarray(dst, np.float64)
+    n = len(src)
+    if n < 3:
+        raise EstimationError(f"an affine map needs 3 correspondences, got {n}")
+    rng = np.random.default_rng(rng)
+    if n * (n - 1) * (n - 2) // 6 <= hypotheses:
+        idx = np.array(list(itertools.combinations(range(n), 3)), np.int64)
+    else:
+        idx = rng.integers(0, n, (hypotheses, 3))
+        idx = idx[(idx[:, 0] != idx[:, 1]) & (idx[:, 0] != idx[:, 2]) & (idx[:, 1] != idx[:, 2])]
+    X = np.concatenate([src[idx], np.ones(idx.shape + (1,))], axis=2)  # (T, 3, 3)
+    det = np.linalg.det(X)
+    ok = np.abs(det) > 1e-6 * (np.abs(X[:, :, :2]).max(axis=(1, 2)) ** 2 + 1.0)
+    if not ok.any():
+        raise EstimationError("every 3-point sample is collinear")
+    M = np.linalg.solve(X[ok], dst[idx[ok]])  # (T, 3, 2): [x y 1] @ M = x'
+    pred = np.c_[src, np.ones(n)] @ M  # (T, n, 2)
+    err = np.linalg.norm(pred - dst, axis=2)
+    inl = err < threshold
+    count = inl.sum(axis=1)
+    best = int(np.argmax(count - np.minimum(err, threshold).sum(axis=1) / (threshold * n + 1.0)))
+    inliers = inl[best]
+    A = np.r_[M[best].T, [[0.0, 0.0, 1.0]]]
+    for _ in range(3):  # local optimisation: refit on the inliers while that does not lose any
+        if inliers.sum() < 3:
+            break
+        A2 = fit_affine(src[inliers], dst[inliers])
+        in2 = np.linalg.norm(src @ A2[:2, :2].T + A2[:2, 2] - dst, axis=1) < threshold
+        if in2.sum() < inliers.sum():
+            break
+        A, same, inliers = A2, np.array_equal(in2, inliers), in2
+        if same:
+            break
+    return A, inliers
+
+
 def significance(inliers: int, matches: int, threshold: float, area: float, n_refs: int) -> float:
     """``-log10`` of the number of false alarms of a homography with ``inliers`` among ``matches``.
 
@@ -464,6 +537,45 @@ def _check(brand: str, r: int, ref: Reference, H: np.ndarray, inl: np.ndarray, s
         area = float(scene_size[0] * scene_size[1])
         score = significance(n_in, len(src), p.ransac_threshold, area, n_tested)
     return Hypothesis(brand, r, len(src), n_in, score, H, quad, pairs, reason)
+
+
+
+def _reprojection_inliers(H: np.ndarray, src: np.ndarray, dst: np.ndarray, threshold: float) -> np.ndarray:
+    """(N,) bool: ``src`` mapped by ``H`` lands within ``threshold`` pixels of ``dst`` (in front of the camera)."""
+    q = np.c_[src, np.ones(len(src))] @ H.T
+    ok = q[:, 2] > 1e-9
+    err = np.full(len(src), np.inf)
+    err[ok] = np.linalg.norm(q[ok, :2] / q[ok, 2:3] - dst[ok], axis=1)
+    return err < threshold
+
+
+def _fit_homography(src: np.ndarray, dst: np.ndarray, ref: Reference, scene_size: tuple[int, int],
+                    p: LogoVerifyParams, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    fit = find_homography(src, dst, threshold=p.ransac_threshold, confidence=0.999, max_iters=p.max_iters, rng=rng)
+    return fit.H, np.asarray(fit.inliers, bool)
+
+
+def _fit_affine_homography(src: np.ndarray, dst: np.ndarray, ref: Reference, scene_size: tuple[int, int],
+                           p: LogoVerifyParams, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    # the affine RANSAC picks the consistent matches; a homography refitted on them replaces the affine map when it
+    # is plausible and explains about as many of all the matches (within 10 %: the affine inlier band of a
+    # perspective view is not the homography's, and a few matches near the band edge may swap sides)
+    A, inl = affine_ransac(src, dst, p.ransac_threshold, p.max_iters, rng)
+    if inl.sum() < 5:
+        return A, inl
+    try:
+        fit = find_homography(src[inl], dst[inl], threshold=p.ransac_threshold, confidence=0.999,
+                              max_iters=p.max_iters, rng=rng)
+    except EstimationError:
+        return A, inl
+    h_inl = _reprojection_inliers(fit.H, src, dst, p.ransac_threshold)
+    if h_inl.sum() >= max(0.9 * inl.sum(), 5) and not shape_problem(fit.H, ref.outline, scene_size, p):
+        return fit.H, h_inl
+    return A, inl
+
+
+#: ``logo.verify.model`` -> fitter(src, dst, reference, scene_size, params, rng) -> (H (3, 3), inliers (N,) bool)
+MODELS = {"homography": _fit_homography, "affine_homography": _fit_affine_homography}
 
 
 def verify(gallery: Gallery, matches: Matches, scene_xy: np.ndarray, scene_size: tuple[int, int],
@@ -512,15 +624,14 @@ def verify(gallery: Gallery, matches: Matches, scene_xy: np.ndarray, scene_size:
             if left.sum() < p.min_matches:
                 break
             try:
-                fit = find_homography(src[left], dst[left], threshold=p.ransac_threshold, confidence=0.999,
-                                      max_iters=p.max_iters, rng=rng)
+                H, fit_inl = MODELS[p.model](src[left], dst[left], ref, scene_size, p, rng)
             except EstimationError as exc:
                 if hyp is None:
                     hyp = Hypothesis(brand, int(r), len(src), 0, -np.inf, None, None, none, f"no homography: {exc}")
                 break
             inl = np.zeros(len(src), bool)
-            inl[np.flatnonzero(left)[np.asarray(fit.inliers, bool)]] = True
-            cand = _check(brand, int(r), ref, fit.H, inl, src, dst, g_idx, s_idx, scene_size,
+            inl[np.flatnonzero(left)[fit_inl]] = True
+            cand = _check(brand, int(r), ref, H, inl, src, dst, g_idx, s_idx, scene_size,
                           len(tested) * attempt, p)
             if hyp is None or (hyp.reason and not cand.reason):
                 hyp = cand

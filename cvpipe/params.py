@@ -473,7 +473,7 @@ SECTIONS.update({
 class LogoMatchParams:
     """``logo.match``: scene -> gallery matching (see :func:`cvpipe.logos.match_scene`)."""
 
-    ratio: float = 0.9
+    ratio: float = 0.95
     k: int = 8
     per_reference: int = 1
     min_features: int = 8
@@ -489,11 +489,12 @@ class LogoMatchParams:
 class LogoVerifyParams:
     """``logo.verify``: homography verification, plausibility checks and the decision threshold."""
 
+    model: str = "affine_homography"
     ransac_threshold: float = 4.0
     max_iters: int = 2000
     max_models: int = 3
-    min_matches: int = 6
-    min_inliers: int = 6
+    min_matches: int = 5
+    min_inliers: int = 5
     min_area: float = 0.001
     max_area: float = 4.0
     max_anisotropy: float = 6.0
@@ -502,6 +503,9 @@ class LogoVerifyParams:
     score_threshold: float = 0.0
 
     def __post_init__(self):
+        models = ("affine_homography", "homography")
+        if self.model not in models:
+            raise ValueError(f"`model` must be one of {list(models)}, got {self.model!r}")
         _in_range("ransac_threshold", self.ransac_threshold, 0.0, 100.0, lo_open=True)
         _in_range("max_iters", self.max_iters, 1, 10_000_000)
         _in_range("max_models", self.max_models, 1, 100)
