@@ -229,7 +229,14 @@ def _prepare(desc: np.ndarray, binary: bool) -> np.ndarray:
     return np.ascontiguousarray(np.sqrt(np.maximum(d, 0)), np.float32)
 
 
-def build_gallery(references: Sequence[Reference], min_features: int = 8) -> Gallery:
+def _strongest(f: Features, n: int) -> Features:
+    """The ``n`` keypoints of highest detector response."""
+    keep = np.sort(np.argsort(-np.asarray(f.response), kind="stable")[:n])
+    return Features(f.xy[keep], f.size[keep], f.angle[keep], f.response[keep], f.descriptors[keep], f.detector)
+
+
+def build_gallery(references: Sequence[Reference], min_features: int = 8,
+                  max_features: int | None = None) -> Gallery:
     """Index the references of every brand once.
 
     Parameters
@@ -239,13 +246,17 @@ def build_gallery(references: Sequence[Reference], min_features: int = 8) -> Gal
     min_features : int
         References with fewer keypoints are dropped (listed in ``Gallery.dropped``): they cannot support a
         verified homography.
+    max_features : int, optional
+        Keep at most this many keypoints per reference, the strongest by detector response. The binary detectors
+        find up to 4000 keypoints inside one boxed logo, and the brute-force Hamming search costs in proportion to
+        the stacked total. Default: keep all.
 
     Raises
     ------
     InputError
         Empty gallery, or no reference with at least ``min_features`` keypoints (the message names the files).
     ValueError
-        Mixed detectors or a bad ``min_features``.
+        Mixed detectors or a bad ``min_features`` / ``max_features``.
     """
     if not isinstance(min_features, (int, np.integer)) or min_features < 4:
         raise ValueError(f"`min_features` must be an integer >= 4, got {min_features!r}")
@@ -265,6 +276,12 @@ def build_gallery(references: Sequence[Reference], min_features: int = 8) -> Gal
             if not (0 <= x1 < x2 <= r.size[0] - 1 and 0 <= y1 < y2 <= r.size[1] - 1):
                 raise ValueError(f"`box` of reference {r.name} must lie inside its {r.size[0]}x{r.size[1]} image "
                                  f"with x1 < x2 and y1 < y2, got {r.box}")
+    if max_features is not None:
+        if not isinstance(max_features, (int, np.integer)) or max_features < min_features:
+            raise ValueError(f"`max_features` must be an integer >= `min_features` ({min_features}), got "
+                             f"{max_features!r}")
+        refs = [r if len(r.features) <= max_features else
+                Reference(r.brand, r.name, _strongest(r.features, int(max_features)), r.size, r.box) for r in refs]
     usable = [r for r in refs if len(r.features) >= min_features]
     dropped = tuple(r.name for r in refs if len(r.features) < min_features)
     if not usable:
@@ -466,19 +483,27 @@ def affine_ransac(src: np.ndarray, dst: np.ndarray, threshold: float, hypotheses
     else:
         idx = rng.integers(0, n, (hypotheses, 3))
         idx = idx[(idx[:, 0] != idx[:, 1]) & (idx[:, 0] != idx[:, 2]) & (idx[:, 1] != idx[:, 2])]
-    X = np.concatenate([src[idx], np.ones(idx.shape + (1,))], axis=2)  # (T, 3, 3)
-    det = np.linalg.det(X)
-    ok = np.abs(det) > 1e-6 * (np.abs(X[:, :, :2]).max(axis=(1, 2)) ** 2 + 1.0)
+    # the linear part L of each sample maps the edge vectors of the source triangle onto the target's: L = E D^-1
+    d1, d2 = src[idx[:, 1]] - src[idx[:, 0]], src[idx[:, 2]] - src[idx[:, 0]]
+    e1, e2 = dst[idx[:, 1]] - dst[idx[:, 0]], dst[idx[:, 2]] - dst[idx[:, 0]]
+    det = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
+    ok = np.abs(det) > 1e-6 * (np.abs(np.c_[d1, d2]).max(axis=1) ** 2 + 1e-12)
     if not ok.any():
         raise EstimationError("every 3-point sample is collinear")
-    M = np.linalg.solve(X[ok], dst[idx[ok]])  # (T, 3, 2): [x y 1] @ M = x'
-    pred = np.c_[src, np.ones(n)] @ M  # (T, n, 2)
-    err = np.linalg.norm(pred - dst, axis=2)
-    inl = err < threshold
-    count = inl.sum(axis=1)
-    best = int(np.argmax(count - np.minimum(err, threshold).sum(axis=1) / (threshold * n + 1.0)))
+    d1, d2, e1, e2, det, idx = d1[ok], d2[ok], e1[ok], e2[ok], det[ok], idx[ok]
+    L = np.empty((len(det), 2, 2))
+    L[:, :, 0] = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) / det[:, None]
+    L[:, :, 1] = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) / det[:, None]
+    t = dst[idx[:, 0]] - np.einsum("tij,tj->ti", L, src[idx[:, 0]])
+    ex = L[:, 0, 0:1] * src[:, 0] + L[:, 0, 1:2] * src[:, 1] + t[:, 0:1] - dst[:, 0]  # (T, n)
+    ey = L[:, 1, 0:1] * src[:, 0] + L[:, 1, 1:2] * src[:, 1] + t[:, 1:2] - dst[:, 1]
+    err2 = ex * ex + ey * ey
+    th2 = threshold * threshold
+    inl = err2 < th2
+    # most inliers; among equals the smallest truncated squared error (MSAC)
+    best = int(np.argmax(inl.sum(axis=1) - np.minimum(err2, th2).sum(axis=1) / (th2 * n + 1.0)))
     inliers = inl[best]
-    A = np.r_[M[best].T, [[0.0, 0.0, 1.0]]]
+    A = np.r_[np.c_[L[best], t[best]], [[0.0, 0.0, 1.0]]]
     for _ in range(3):  # local optimisation: refit on the inliers while that does not lose any
         if inliers.sum() < 3:
             break
@@ -560,7 +585,7 @@ def _fit_affine_homography(src: np.ndarray, dst: np.ndarray, ref: Reference, sce
     # the affine RANSAC picks the consistent matches; a homography refitted on them replaces the affine map when it
     # is plausible and explains about as many of all the matches (within 10 %: the affine inlier band of a
     # perspective view is not the homography's, and a few matches near the band edge may swap sides)
-    A, inl = affine_ransac(src, dst, p.ransac_threshold, p.max_iters, rng)
+    A, inl = affine_ransac(src, dst, p.ransac_threshold, p.affine_samples, rng)
     if inl.sum() < 5:
         return A, inl
     try:

@@ -477,12 +477,14 @@ class LogoMatchParams:
     k: int = 8
     per_reference: int = 1
     min_features: int = 8
+    reference_features: int = 1000
 
     def __post_init__(self):
         _in_range("ratio", self.ratio, 0.0, 1.0, lo_open=True)
         _in_range("k", self.k, 2, 100)
         _in_range("per_reference", self.per_reference, 1, self.k)
         _in_range("min_features", self.min_features, 4, 100_000)
+        _in_range("reference_features", self.reference_features, self.min_features, 1_000_000)
 
 
 @dataclass(frozen=True)
@@ -492,6 +494,7 @@ class LogoVerifyParams:
     model: str = "affine_homography"
     ransac_threshold: float = 4.0
     max_iters: int = 2000
+    affine_samples: int = 500
     max_models: int = 3
     min_matches: int = 5
     min_inliers: int = 5
@@ -508,6 +511,7 @@ class LogoVerifyParams:
             raise ValueError(f"`model` must be one of {list(models)}, got {self.model!r}")
         _in_range("ransac_threshold", self.ransac_threshold, 0.0, 100.0, lo_open=True)
         _in_range("max_iters", self.max_iters, 1, 10_000_000)
+        _in_range("affine_samples", self.affine_samples, 1, 10_000_000)
         _in_range("max_models", self.max_models, 1, 100)
         _in_range("min_matches", self.min_matches, 4, 100_000)
         _in_range("min_inliers", self.min_inliers, 4, 100_000)

@@ -25,7 +25,7 @@ def main() -> None:
     args = ap.parse_args()
     mp = load_section(LogoMatchParams, "logo.match", args.params)
     vp = load_section(LogoVerifyParams, "logo.verify", args.params)
-    gallery = load_gallery_features(Path(args.gallery), mp.min_features)
+    gallery = load_gallery_features(Path(args.gallery), mp.min_features, mp.reference_features)
     match_s = io.load_json(Path(args.matches) / "timings.json")["match_s"]
     truth = {s["file"]: s for s in io.load_json(args.truth)["scenes"]}
     out, records = Path(args.out), []

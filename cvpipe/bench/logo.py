@@ -106,7 +106,7 @@ def run_benchmark(root: Path, methods: list[str], fp: FeaturesParams, mp: LogoMa
         t0 = time.perf_counter()
         refs = [logos.Reference(b, n, detect(g, m, fp.max_features, _mask(g.shape, box)), (g.shape[1], g.shape[0]),
                                 box) for b, n, g, box in gallery_imgs]
-        galleries[m] = logos.build_gallery(refs, mp.min_features)
+        galleries[m] = logos.build_gallery(refs, mp.min_features, mp.reference_features)
         gallery_time[m] = time.perf_counter() - t0
     scenes = [(f, b, io.read_image(root / f, "gray")) for f, b in tests]
     # warm-up: one scene per method (FLANN, OpenCV thread pools, scipy imports)

@@ -36,13 +36,14 @@ def gallery_files(folder: str | Path) -> list[tuple[str, Path]]:
     return sorted(items, key=lambda t: (t[0], str(t[1])))
 
 
-def load_gallery(folder: str | Path, detector: str, max_features: int, min_features: int) -> logos.Gallery:
+def load_gallery(folder: str | Path, detector: str, max_features: int, min_features: int,
+                 reference_features: int | None = None) -> logos.Gallery:
     """Read, detect and index a gallery folder (see :func:`gallery_files`)."""
     refs = []
     for brand, f in gallery_files(folder):
         gray = io.read_image(f, "gray")
         refs.append(logos.Reference(brand, str(f), detect(gray, detector, max_features), (gray.shape[1], gray.shape[0])))
-    return logos.build_gallery(refs, min_features)
+    return logos.build_gallery(refs, min_features, reference_features)
 
 
 def detection_json(scene: str, det: logos.Detection) -> dict:
@@ -76,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
         vp = LogoVerifyParams(score_threshold=args.threshold)
     except ValueError as exc:
         raise InputError(str(exc).replace("`ratio`", "`--ratio`")) from exc
-    gallery = load_gallery(args.gallery, args.method, args.max_features, mp.min_features)
+    gallery = load_gallery(args.gallery, args.method, args.max_features, mp.min_features, mp.reference_features)
     records, failed = [], 0
     for scene in args.scenes:
         try:
