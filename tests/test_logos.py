@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from cvpipe import cli, logos
-from cvpipe.errors import InputError
+from cvpipe.errors import EstimationError, InputError
 from cvpipe.features import detect
 from cvpipe.params import LogoMatchParams, LogoVerifyParams
 from cvpipe.samples import fit, paste, photo
@@ -198,6 +198,48 @@ def test_evaluate_counts_wrong_brand_as_false_positive():
     assert [c["threshold"] for c in ev["curve"]] == [9.0, 5.0, 1.0]
 
 
+def test_gallery_keeps_strongest_keypoints(gallery):
+    g = logos.build_gallery(gallery.references, max_features=40)
+    for full, capped in zip(gallery.references, g.references):
+        assert len(capped.features) == 40
+        # the 40 kept are exactly the 40 of highest response
+        assert np.sort(capped.features.response).min() >= np.sort(full.features.response)[-40]
+    assert len(g.ref_of) == 40 * len(g.references)
+
+
+def test_affine_ransac_recovers_map_among_outliers():
+    rng = np.random.default_rng(3)
+    A = np.array([[0.8, -0.3, 40.0], [0.25, 0.9, -12.0], [0.0, 0.0, 1.0]])
+    src = rng.uniform(0, 200, (40, 2))
+    dst = src @ A[:2, :2].T + A[:2, 2] + rng.normal(0, 0.5, (40, 2))
+    bad = rng.permutation(40)[:28]  # 70 % outliers, as on a busy photo
+    dst[bad] = rng.uniform(0, 300, (28, 2))
+    fit, inl = logos.affine_ransac(src, dst, threshold=3.0, hypotheses=2000, rng=0)
+    good = np.setdiff1d(np.arange(40), bad)
+    # 0.5 px noise: every true match lies within 3 px; a random point does so with probability ~3e-4
+    assert set(np.flatnonzero(inl)) == set(good)
+    corners = logos.outline((200, 200))
+    assert logos.quad_error(logos.project(fit, corners), logos.project(A, corners)) < 1.0
+
+
+def test_affine_ransac_degenerate():
+    with pytest.raises(EstimationError, match="needs 3 correspondences"):
+        logos.affine_ransac(np.zeros((2, 2)), np.zeros((2, 2)), 3.0)
+    line = np.c_[np.arange(10.0), 2 * np.arange(10.0)]
+    with pytest.raises(EstimationError, match="collinear"):
+        logos.affine_ransac(line, line, 3.0)
+
+
+@pytest.mark.parametrize("model", ["homography", "affine_homography"])
+def test_models_recover_perspective_view(gallery, marks, model):
+    # the affine-first model must still end with the homography when the view has perspective
+    H = _view((320, 240), 0.9, 25, PERSP)
+    det = logos.recognize(gallery, detect(_scene(marks["brand0"], H), "sift"), (640, 480),
+                          verify_params=LogoVerifyParams(model=model), rng=0)
+    assert det.brand == "brand0"
+    assert logos.quad_error(det.quad, logos.project(H, logos.outline((200, 200)))) < 2.5
+
+
 # --------------------------------------------------------------------------------------------- validation
 
 
@@ -223,6 +265,7 @@ def test_gallery_mixed_detectors(marks):
 
 @pytest.mark.parametrize("kwargs, match", [
     ({"min_features": 3}, "`min_features` must be an integer >= 4"),
+    ({"max_features": 7}, r"`max_features` must be an integer >= `min_features` \(8\)"),
 ])
 def test_gallery_min_features(gallery, kwargs, match):
     with pytest.raises(ValueError, match=match):
@@ -278,6 +321,9 @@ def test_draw_confusion_shape():
     (LogoMatchParams, {"k": 1}, "`k` must be in"),
     (LogoMatchParams, {"per_reference": 9}, "`per_reference` must be in"),
     (LogoMatchParams, {"min_features": 2}, "`min_features` must be in"),
+    (LogoMatchParams, {"reference_features": 7}, "`reference_features` must be in"),
+    (LogoVerifyParams, {"model": "similarity"}, "`model` must be one of"),
+    (LogoVerifyParams, {"affine_samples": 0}, "`affine_samples` must be in"),
     (LogoVerifyParams, {"ransac_threshold": 0.0}, "`ransac_threshold` must be in"),
     (LogoVerifyParams, {"max_iters": 0}, "`max_iters` must be in"),
     (LogoVerifyParams, {"max_models": 0}, "`max_models` must be in"),
