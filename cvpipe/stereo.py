@@ -71,14 +71,17 @@ _BIG = 16000
 
 
 @njit(cache=True, parallel=True)
-def _census(padded, ry, rx):  # pragma: no cover - compiled
-    """Census signature per pixel of an image padded by (ry, rx): bit set where the neighbour is darker than the
-    centre, neighbours in row-major order without the centre."""
-    h = padded.shape[0] - 2 * ry
-    w = padded.shape[1] - 2 * rx
-    out = np.zeros((h, w), np.uint64)
-    for y in prange(h):
-        row = out[y]
+def _census(pad_l, pad_r, ry, rx):  # pragma: no cover - compiled
+    """Census signatures per pixel of two images padded by (ry, rx), as (2, H, W) uint64 (one parallel launch for
+    both): bit set where the neighbour is darker than the centre, neighbours in row-major order without the centre.
+    """
+    h = pad_l.shape[0] - 2 * ry
+    w = pad_l.shape[1] - 2 * rx
+    out = np.zeros((2, h, w), np.uint64)
+    for i in prange(2 * h):
+        y = i % h
+        padded = pad_l if i < h else pad_r
+        row = out[i // h, y]
         centre = padded[y + ry, rx:rx + w]
         for dy in range(2 * ry + 1):
             for dx in range(2 * rx + 1):
@@ -566,8 +569,8 @@ def disparity_sgm(
     # 4 KiB pages, first-touch page faults on the tens of MB of volumes cost a sizeable share of the run time
     h, w = gl.shape
     cost = np.empty((h, w, int(max_disp)), np.uint8)
-    _cost_volume(_census(gl_pad, ry, rx), _census(gr_pad, ry, rx), planes_l, planes_r, np.int32(ad_cap),
-                 np.int32(ad_mult), np.uint8(c_max), cost)
+    cen = _census(gl_pad, gr_pad, ry, rx)
+    _cost_volume(cen[0], cen[1], planes_l, planes_r, np.int32(ad_cap), np.int32(ad_mult), np.uint8(c_max), cost)
     steps = np.arange(256, dtype=np.float64)
     p2_lut = np.full(256, p2, np.float64) if p2_tau == 0 else np.floor(p2 * p2_tau / (p2_tau + steps))
     p2_lut = np.maximum(p2_lut, p1 + 1).astype(np.int16)
