@@ -488,18 +488,6 @@ def _solve(blocks: list, homs, x0: np.ndarray, columns, T: dict | None = None,
     src_h = np.column_stack([src, np.ones(len(src))])
     dst_h = np.column_stack([dst, np.ones(len(dst))])
     n = len(src)
-    rows, cols = [], []
-    for k, blk in enumerate(blocks):  # residual rows of edge k: forward 2p, 2p+1 and backward 2n + 2p, 2n + 2p + 1
-        pts = np.nonzero(edge == k)[0]
-        r = np.concatenate([2 * pts, 2 * pts + 1, 2 * n + 2 * pts, 2 * n + 2 * pts + 1])
-        for a in blk[:2]:
-            c = columns(a)
-            if len(c):
-                rows.append(np.repeat(r, len(c)))
-                cols.append(np.tile(np.asarray(c), len(r)))
-    sparsity = coo_matrix((np.ones(sum(len(r) for r in rows), np.int8), (np.concatenate(rows), np.concatenate(cols))),
-                          shape=(4 * n, len(x0))).tocsr()
-    sparsity.data[:] = 1
 
     def residuals(x):
         H = homs(x)
@@ -510,6 +498,19 @@ def _solve(blocks: list, homs, x0: np.ndarray, columns, T: dict | None = None,
         return np.concatenate([(fwd[:, :2] / fwd[:, 2:] - dst).ravel(), (bwd[:, :2] / bwd[:, 2:] - src).ravel()])
 
     if T is None:
+        # residual rows of edge k: forward 2p, 2p+1 and backward 2n + 2p, 2n + 2p + 1
+        rows, cols = [], []
+        for k, blk in enumerate(blocks):
+            pts = np.nonzero(edge == k)[0]
+            r = np.concatenate([2 * pts, 2 * pts + 1, 2 * n + 2 * pts, 2 * n + 2 * pts + 1])
+            for a in blk[:2]:
+                c = columns(a)
+                if len(c):
+                    rows.append(np.repeat(r, len(c)))
+                    cols.append(np.tile(np.asarray(c), len(r)))
+        sparsity = coo_matrix((np.ones(sum(len(r) for r in rows), np.int8),
+                               (np.concatenate(rows), np.concatenate(cols))), shape=(4 * n, len(x0))).tocsr()
+        sparsity.data[:] = 1
         sp = sparsity.tocsc()
 
         def jac(x):  # forward differences, one column at a time (used for the few rotation parameters)
@@ -524,36 +525,50 @@ def _solve(blocks: list, homs, x0: np.ndarray, columns, T: dict | None = None,
             r, c, v = (np.concatenate([t[m] for t in cols]) for m in range(3))
             return coo_matrix((v, (r, c)), shape=(4 * n, len(x))).tocsr()
     else:
-        Ts = np.stack([T[a] for a in keys])
-        col0 = np.array([columns(a)[0] if len(columns(a)) else -1 for a in keys])
-        pi, pj = e_i[edge], e_j[edge]
-        rows2 = np.arange(2 * n).reshape(n, 2)
+        col0 = {a: (columns(a)[0] if len(columns(a)) else -1) for a in keys}
+        bounds = np.searchsorted(edge, np.arange(len(blocks) + 1))  # points are stored edge by edge
+        C_ref = Tr_inv
 
-        def part(Hs, Hinv, a, b, pts_h, row_off):
-            # residual proj(H_b^-1 H_a p) - q: derivatives w.r.t. Hn_a (source) and Hn_b (target)
-            u = np.einsum("nij,nj->ni", Hinv[b] @ Hs[a], pts_h)
-            P = np.zeros((n, 2, 3))
-            P[:, 0, 0] = P[:, 1, 1] = 1 / u[:, 2]
-            P[:, :, 2] = -u[:, :2] / u[:, 2:] ** 2
-            B = P @ (Hinv[b] @ Tr_inv)
-            q = np.einsum("nij,nj->ni", Ts[a], pts_h)
-            w = np.einsum("nij,nj->ni", Ts[b], u)
-            out = []
-            for node, vec, sign in ((a, q, 1.0), (b, w, -1.0)):
-                vals = (sign * B[:, :, :, None] * vec[:, None, None, :]).reshape(n, 2, 9)[:, :, :8]
-                keep = col0[node] >= 0
-                r = np.broadcast_to((rows2 + row_off)[:, :, None], (n, 2, 8))[keep]
-                c = (col0[node][:, None, None] + np.arange(8)[None, None, :]).repeat(2, axis=1)[keep]
-                out.append((r.ravel(), c.ravel(), vals[keep].ravel()))
-            return out
+        def derivatives(Ha, Hb_inv, Ta, Tb, pts_h):
+            # residual proj(H_b^-1 H_a p) - q of one edge: (2m, 8) derivatives w.r.t. Hn_a (source), Hn_b (target)
+            u = pts_h @ (Hb_inv @ Ha).T
+            iw = 1.0 / u[:, 2:]
+            C = Hb_inv @ C_ref
+            B = np.stack([(C[0] - u[:, :1] * iw * C[2]) * iw, (C[1] - u[:, 1:2] * iw * C[2]) * iw], axis=1)
+            q, w = pts_h @ Ta.T, u @ Tb.T
+            Ja = (B[:, :, :, None] * q[:, None, None, :]).reshape(-1, 9)[:, :8]
+            Jb = -(B[:, :, :, None] * w[:, None, None, :]).reshape(-1, 9)[:, :8]
+            return Ja, Jb
 
-        def jac(x):
+        def normal(x, r):
+            # J^T J and J^T r accumulated edge by edge in dense (8, 8) blocks: a residual touches two images only
             H = homs(x)
-            Hs = np.stack([H[a] for a in keys])
-            Hinv = np.linalg.inv(Hs)
-            parts = part(Hs, Hinv, pi, pj, src_h, 0) + part(Hs, Hinv, pj, pi, dst_h, 2 * n)
-            r, c, v = (np.concatenate([p_[k] for p_ in parts]) for k in range(3))
-            return coo_matrix((v, (r, c)), shape=(4 * n, len(x0))).tocsr()
+            Hinv = {a: np.linalg.inv(H[a]) for a in keys}
+            A = np.zeros((len(x0), len(x0)))
+            g = np.zeros(len(x0))
+            fwd, bwd = r[:2 * n], r[2 * n:]
+            for k, blk in enumerate(blocks):
+                lo, hi = bounds[k], bounds[k + 1]
+                for a, b, pts_h, res in ((blk[0], blk[1], src_h[lo:hi], fwd[2 * lo:2 * hi]),
+                                         (blk[1], blk[0], dst_h[lo:hi], bwd[2 * lo:2 * hi])):
+                    Ja, Jb = derivatives(H[a], Hinv[b], T[a], T[b], pts_h)
+                    ca, cb = col0[a], col0[b]
+                    if ca >= 0:
+                        A[ca:ca + 8, ca:ca + 8] += Ja.T @ Ja
+                        g[ca:ca + 8] += Ja.T @ res
+                    if cb >= 0:
+                        A[cb:cb + 8, cb:cb + 8] += Jb.T @ Jb
+                        g[cb:cb + 8] += Jb.T @ res
+                    if ca >= 0 and cb >= 0:
+                        cross = Ja.T @ Jb
+                        A[ca:ca + 8, cb:cb + 8] += cross
+                        A[cb:cb + 8, ca:ca + 8] += cross.T
+            return A, g
+
+        x = levenberg_marquardt(residuals, None, x0, normal=normal)
+        if not np.all(np.isfinite(x)):
+            raise EstimationError("homography refinement diverged; set `refine: none` or raise `min_inliers`")
+        return x
 
     x = levenberg_marquardt(residuals, jac, x0)
     if not np.all(np.isfinite(x)):
@@ -571,10 +586,12 @@ def _cholesky_solve(A: np.ndarray, b: np.ndarray) -> np.ndarray | None:
     return x if ok and np.all(np.isfinite(x)) else None
 
 
-def levenberg_marquardt(fun, jac, x0: np.ndarray, max_iter: int = 30, ftol: float = 1e-7) -> np.ndarray:
+def levenberg_marquardt(fun, jac, x0: np.ndarray, max_iter: int = 30, ftol: float = 1e-7,
+                        normal=None) -> np.ndarray:
     """Minimise ``|fun(x)|^2`` by Levenberg-Marquardt on the normal equations.
 
-    ``jac(x)`` returns the sparse (m, n) Jacobian. With n in the hundreds and m in the tens of thousands, forming
+    ``jac(x)`` returns the sparse (m, n) Jacobian; alternatively ``normal(x, r)`` returns ``(J^T J, J^T r)``
+    directly (dense (n, n) and (n,)), for problems whose structure gives them without forming ``J``. With n in the hundreds and m in the tens of thousands, forming
     ``J^T J`` once per iteration is far cheaper than an iterative trust-region solver (``least_squares``' LSMR does
     hundreds of length-m vector operations per step, which thread-contended BLAS makes slow on a shared machine).
     Marquardt's scaling by ``diag(J^T J)`` makes the step invariant to the parameter units.
@@ -589,9 +606,11 @@ def levenberg_marquardt(fun, jac, x0: np.ndarray, max_iter: int = 30, ftol: floa
     cost = float(r @ r)
     lam = 1e-4
     for _ in range(max_iter):
-        J = jac(x)
-        A = (J.T @ J).toarray()
-        g = J.T @ r
+        if normal is not None:
+            A, g = normal(x, r)
+        else:
+            J = jac(x)
+            A, g = (J.T @ J).toarray(), J.T @ r
         d = np.diag(A).copy()
         d[d <= 0] = 1.0
         while lam < 1e10:
