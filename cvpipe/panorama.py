@@ -1003,6 +1003,9 @@ class Panorama:
         Rectangle cut from the blended canvas.
     timings : dict str -> float
         Seconds per step.
+    graph : MatchGraph
+        The pairwise match graph (at the registration resolution ``graph.sizes``): every accepted pair's own
+        homography, before any global model.
     """
 
     image: np.ndarray
@@ -1013,6 +1016,7 @@ class Panorama:
     to_panorama: np.ndarray
     crop: tuple
     timings: dict
+    graph: MatchGraph | None = None
 
 
 def _check_images(images: Sequence[np.ndarray]) -> None:
@@ -1093,7 +1097,7 @@ def stitch(images: Sequence[np.ndarray], features: PanoramaFeaturesParams = Pano
     for k, a in enumerate(reg.used):
         H_full[a] = comp.G[k] @ resize_matrix(full_sizes[a], comp.sizes[k])
     return Panorama(pano[y:y + h, x:x + w], mask[y:y + h, x:x + w], seams[y:y + h, x:x + w], reg, H_full,
-                    to_pano, tuple(int(v) for v in rect), t)
+                    to_pano, tuple(int(v) for v in rect), t, graph)
 
 
 @dataclass(frozen=True)
