@@ -233,8 +233,8 @@ def run(args: argparse.Namespace) -> int:
         results.append(row)
     summary = {
         "sets": results, "numba_compile_or_load_seconds": compile_seconds, "repeat": args.repeat,
-        "projection": args.projection, "detector": args.detector, "refine": args.refine, "work_megapix": feats.work_megapix,
-        "compose_megapix": warp.compose_megapix,
+        "projection": args.projection, "detector": args.detector, "refine": args.refine,
+        "work_megapix": feats.work_megapix, "compose_megapix": warp.compose_megapix,
         "all_stitched": all(r["ours_ok"] for r in results),
         "time_ratio_total": sum(r["ours_seconds"] for r in results) / sum(r["opencv_seconds"] for r in results),
     }
