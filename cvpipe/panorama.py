@@ -669,8 +669,9 @@ def levenberg_marquardt(fun, jac, x0: np.ndarray, max_iter: int = 30, ftol: floa
 
     ``jac(x)`` returns the sparse (m, n) Jacobian; alternatively ``normal(x, r)`` returns ``(J^T J, J^T r)``
     directly (dense (n, n) and (n,)), for problems whose structure gives them without forming ``J``. With n in
-    the hundreds and m in the tens of thousands, forming ``J^T J`` once per iteration is far cheaper than an iterative trust-region solver (``least_squares``' LSMR does
-    hundreds of length-m vector operations per step, which thread-contended BLAS makes slow on a shared machine).
+    the hundreds and m in the tens of thousands, forming ``J^T J`` once per iteration is far cheaper than an
+    iterative trust-region solver (``least_squares``' LSMR does hundreds of length-m vector operations per step,
+    which thread-contended BLAS makes slow on a shared machine).
     Marquardt's scaling by ``diag(J^T J)`` makes the step invariant to the parameter units.
 
     Returns
