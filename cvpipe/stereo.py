@@ -70,14 +70,14 @@ def _gray(img: np.ndarray) -> np.ndarray:
 _BIG = 16000
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _census(padded, ry, rx):  # pragma: no cover - compiled
     """Census signature per pixel of an image padded by (ry, rx): bit set where the neighbour is darker than the
     centre, neighbours in row-major order without the centre."""
     h = padded.shape[0] - 2 * ry
     w = padded.shape[1] - 2 * rx
     out = np.zeros((h, w), np.uint64)
-    for y in range(h):
+    for y in prange(h):
         row = out[y]
         centre = padded[y + ry, rx:rx + w]
         for dy in range(2 * ry + 1):
@@ -99,8 +99,8 @@ def _popcount(v):  # pragma: no cover - compiled
 
 
 @njit(cache=True, parallel=True)
-def _cost_volume(cen_l, cen_r, planes_l, planes_r, max_disp, ad_cap, ad_mult, invalid_cost):  # pragma: no cover
-    """(H, W, D) uint8 matching cost: census Hamming distance + (min(sum_c |L_c - R_c|, ad_cap) * ad_mult) >> 16.
+def _cost_volume(cen_l, cen_r, planes_l, planes_r, ad_cap, ad_mult, invalid_cost, cost):  # pragma: no cover
+    """Fill ``cost`` (H, W, D) uint8 with the matching cost: census Hamming distance + (min(sum_c |L_c - R_c|, ad_cap) * ad_mult) >> 16.
 
     ``planes_*`` are (C, H, W) int16 channel planes; ``ad_mult`` = 0 skips the absolute-difference term. The right
     image's rows are reversed once so that the candidates x - d, d = 0, 1, ... of a pixel are a forward slice,
@@ -108,7 +108,7 @@ def _cost_volume(cen_l, cen_r, planes_l, planes_r, max_disp, ad_cap, ad_mult, in
     """
     h, w = cen_l.shape
     nch = planes_l.shape[0]
-    cost = np.empty((h, w, max_disp), np.uint8)
+    max_disp = cost.shape[2]
     for y in prange(h):
         rev = cen_r[y, ::-1].copy()
         rev_planes = np.empty((nch, w), np.int32)
@@ -118,24 +118,23 @@ def _cost_volume(cen_l, cen_r, planes_l, planes_r, max_disp, ad_cap, ad_mult, in
         adsum = np.zeros(max_disp, np.int32)
         for x in range(w):
             cl = cen_l[y, x]
-            out = cost[y, x]
             nd = min(max_disp, x + 1)
-            base = w - 1 - x
-            seg = rev[base:base + nd]
+            # unsigned indices instead of per-pixel views: a view costs two atomic reference-count updates and a
+            # signed base + d a wraparound test per load (either one kept this kernel 2-3x slower)
+            base = np.uint64(w - 1 - x)
             for d in range(nd):
-                out[d] = np.uint8(_popcount(cl ^ seg[d]))
+                cost[y, x, d] = np.uint8(_popcount(cl ^ rev[base + np.uint64(d)]))
             for d in range(nd, max_disp):
-                out[d] = invalid_cost
+                cost[y, x, d] = invalid_cost
             if ad_mult > 0:
                 for d in range(nd):
                     adsum[d] = 0
                 for c in range(nch):
                     lv = np.int32(planes_l[c, y, x])
-                    rseg = rev_planes[c, base:base + nd]
                     for d in range(nd):
-                        adsum[d] += abs(lv - rseg[d])
+                        adsum[d] += abs(lv - rev_planes[c, base + np.uint64(d)])
                 for d in range(nd):
-                    out[d] += np.uint8((min(adsum[d], ad_cap) * ad_mult) >> 16)
+                    cost[y, x, d] += np.uint8((min(adsum[d], ad_cap) * ad_mult) >> 16)
     return cost
 
 
@@ -228,99 +227,103 @@ def _sweep(cost, gray, dy, nk, p1, p2_lut, out):  # pragma: no cover - compiled
 
 
 @njit(cache=True, parallel=True)
-def _aggregate(cost, gray, nk, p1, p2_lut):  # pragma: no cover - compiled
-    """Path costs summed over all directions, as two uint16 volumes whose sum is the aggregated cost S.
-
-    The downward and the upward sweep (``nk`` directions each, see :func:`_sweep`) run in parallel; then the
-    left-to-right and right-to-left paths of every row (rows in parallel) are added to the first volume.
+def _aggregate(cost, gray, nk, p1, p2_lut, down, up):  # pragma: no cover - compiled
+    """Path costs of the row-to-row directions into two (H, W, D) uint16 volumes: ``down`` and ``up``, whose sweeps
+    (``nk`` directions each, see :func:`_sweep`) run in parallel. The horizontal paths are added row by row in
+    :func:`_winner`, while the row is in cache.
     """
-    h, w, nd = cost.shape
-    down = np.empty((h, w, nd), np.uint16)
-    up = np.empty((h, w, nd), np.uint16)
     for i in prange(2):
         if i == 0:
             _sweep(cost, gray, 1, nk, p1, p2_lut, down)
         else:
             _sweep(cost, gray, -1, nk, p1, p2_lut, up)
+
+
+@njit(cache=True, parallel=True)
+def _winner(cost, down, up, gray, p1, p2_lut, uniqueness, subpixel):  # pragma: no cover - compiled
+    """Add the two horizontal paths of every row (rows in parallel) to ``down`` + ``up`` into the row's aggregated
+    cost S (W, D), and take its winner-take-all disparities: the left image's (float32, -1 = rejected) and the
+    right image's (int32), without writing S back to memory.
+    """
+    h, w, nd = cost.shape
+    disp = np.empty((h, w), np.float32)
+    disp_r = np.zeros((h, w), np.int32)
     for y in prange(h):
+        srow = np.empty((w, nd), np.uint16)
         a = np.full((1, nd + 2), _BIG, np.int16)
         b = np.full((1, nd + 2), _BIG, np.int16)
-        # two explicit loops, each adding straight into the volume: a computed x, or staging the row in a buffer,
-        # made LLVM's code 3x slower (measured)
+        # two explicit loops: a computed x made LLVM's code 3x slower (measured)
         m = _path_start(cost, y, 0, a, 0)
         for d in range(nd):
-            down[y, 0, d] += np.uint16(a[0, d + 1])
+            srow[0, d] = down[y, 0, d] + up[y, 0, d] + np.uint16(a[0, d + 1])
         for x in range(1, w):
             p2e = p2_lut[abs(np.int32(gray[y, x]) - np.int32(gray[y, x - 1]))]
             m = _path_step(a, 0, m, cost, y, x, p1, p2e, b, 0)
             for d in range(nd):
-                down[y, x, d] += np.uint16(b[0, d + 1])
+                srow[x, d] = down[y, x, d] + up[y, x, d] + np.uint16(b[0, d + 1])
             a, b = b, a
         m = _path_start(cost, y, w - 1, a, 0)
         for d in range(nd):
-            down[y, w - 1, d] += np.uint16(a[0, d + 1])
+            srow[w - 1, d] += np.uint16(a[0, d + 1])
         for x in range(w - 2, -1, -1):
             p2e = p2_lut[abs(np.int32(gray[y, x]) - np.int32(gray[y, x + 1]))]
             m = _path_step(a, 0, m, cost, y, x, p1, p2e, b, 0)
             for d in range(nd):
-                down[y, x, d] += np.uint16(b[0, d + 1])
+                srow[x, d] += np.uint16(b[0, d + 1])
             a, b = b, a
-    return down, up
+        _winner_row(srow, y, uniqueness, subpixel, disp, disp_r)
+    return disp, disp_r
 
 
-@njit(cache=True, parallel=True)
-def _winner(down, up, uniqueness, subpixel):  # pragma: no cover - compiled
-    """Winner-take-all disparity of the left image (float32, -1 = rejected) and of the right image (int32) from the
-    aggregated cost S = down + up.
+@njit(cache=True, inline="always")
+def _winner_row(srow, y, uniqueness, subpixel, disp, disp_r):  # pragma: no cover - compiled
+    """Winner-take-all of row ``y`` from its aggregated cost ``srow`` (W, D), into ``disp`` and ``disp_r``.
 
-    The right image's disparity reuses the volume: D_R(xr) = argmin_d S(xr + d, d). A left pixel is rejected when a
-    disparity more than one step from the winner costs less than (1 + uniqueness) times the winner's cost.
-    Each row of S is transposed to (D, W) so that every minimum runs over contiguous x with branch-free selects.
+    Left image: the first (smallest) d with the least cost among d <= x. Right image: D_R(xr) = argmin_d
+    S(xr + d, d), gathered while scanning the left pixels: pixel x offers d to xr = x - d, and these candidates are
+    kept reversed (index w - 1 - xr = w - 1 - x + d) so that they are contiguous in d. A left pixel is rejected
+    when a disparity more than one step from the winner costs less than (1 + uniqueness) times the winner's cost.
     """
-    h, w, nd = down.shape
-    disp = np.empty((h, w), np.float32)
-    disp_r = np.zeros((h, w), np.int32)
-    for y in prange(h):
-        st = np.empty((nd, w), np.uint16)
-        for x in range(w):
-            for d in range(nd):
-                st[d, x] = down[y, x, d] + up[y, x, d]
-        best = np.full(w, 65535, np.uint16)
-        arg = np.zeros(w, np.int32)
-        best_r = np.full(w, 65535, np.uint16)
-        arg_r = np.zeros(w, np.int32)
-        for d in range(nd):
-            for x in range(d, w):  # left image: x - d >= 0
-                v = st[d, x]
-                better = v < best[x]
-                best[x] = v if better else best[x]
-                arg[x] = d if better else arg[x]
-            for xr in range(w - d):  # right image: xr + d < w
-                v = st[d, xr + d]
-                better = v < best_r[xr]
-                best_r[xr] = v if better else best_r[xr]
-                arg_r[xr] = d if better else arg_r[xr]
-        rejected = np.zeros(w, np.bool_)
+    w, nd = srow.shape
+    best_r = np.full(w, 65535, np.uint16)
+    arg_r = np.zeros(w, np.int32)
+    for x in range(w):
+        n = min(nd, x + 1)
+        m = np.uint16(65535)
+        for d in range(n):
+            m = min(m, srow[x, d])
+        bd = 0
+        for d in range(n):
+            if srow[x, d] == m:
+                bd = d
+                break
+        # unsigned index: a signed base + d costs a wraparound test that stops LLVM from vectorizing
+        base = np.uint64(w - 1 - x)
+        for d in range(n):
+            i = base + np.uint64(d)
+            v = srow[x, d]
+            better = v < best_r[i]
+            best_r[i] = v if better else best_r[i]
+            arg_r[i] = d if better else arg_r[i]
         if uniqueness > 0:
-            for d in range(nd):
-                for x in range(d, w):
-                    far = d < arg[x] - 1 or d > arg[x] + 1
-                    rejected[x] = rejected[x] or (far and st[d, x] < best[x] * (1.0 + uniqueness))
-        for x in range(w):
-            disp_r[y, x] = arg_r[x]
-            if rejected[x]:
+            limit = m * (1.0 + uniqueness)
+            rejected = False
+            for d in range(n):
+                if (d < bd - 1 or d > bd + 1) and srow[x, d] < limit:
+                    rejected = True
+            if rejected:
                 disp[y, x] = -1.0
                 continue
-            bd = arg[x]
-            dv = np.float32(bd)
-            if subpixel and 0 < bd < min(nd, x + 1) - 1:
-                cm = np.float64(st[bd - 1, x])
-                cp = np.float64(st[bd + 1, x])
-                den = cm - 2.0 * np.float64(best[x]) + cp
-                if den > 0:
-                    dv = np.float32(bd + 0.5 * (cm - cp) / den)
-            disp[y, x] = dv
-    return disp, disp_r
+        dv = np.float32(bd)
+        if subpixel and 0 < bd < n - 1:
+            cm = np.float64(srow[x, bd - 1])
+            cp = np.float64(srow[x, bd + 1])
+            den = cm - 2.0 * np.float64(m) + cp
+            if den > 0:
+                dv = np.float32(bd + 0.5 * (cm - cp) / den)
+        disp[y, x] = dv
+    for xr in range(w):
+        disp_r[y, xr] = arg_r[w - 1 - xr]
 
 
 @njit(cache=True)
@@ -530,15 +533,20 @@ def disparity_sgm(
                          "must stay <= 255")
     gl_pad = np.pad(gl, ((ry, ry), (rx, rx)), mode="edge")
     gr_pad = np.pad(gr, ((ry, ry), (rx, rx)), mode="edge")
-    cost = _cost_volume(_census(gl_pad, ry, rx), _census(gr_pad, ry, rx), planes_l, planes_r, int(max_disp),
-                        np.int32(ad_cap), np.int32(ad_mult), np.uint8(c_max))
+    # the volumes are allocated by numpy, which asks the kernel for huge pages (numba's allocator does not): with
+    # 4 KiB pages, first-touch page faults on the tens of MB of volumes cost a sizeable share of the run time
+    h, w = gl.shape
+    cost = np.empty((h, w, int(max_disp)), np.uint8)
+    _cost_volume(_census(gl_pad, ry, rx), _census(gr_pad, ry, rx), planes_l, planes_r, np.int32(ad_cap),
+                 np.int32(ad_mult), np.uint8(c_max), cost)
     steps = np.arange(256, dtype=np.float64)
     p2_lut = np.full(256, p2, np.float64) if p2_tau == 0 else np.floor(p2 * p2_tau / (p2_tau + steps))
     p2_lut = np.maximum(p2_lut, p1 + 1).astype(np.int16)
-    down, up = _aggregate(cost, gl, 3 if paths == 8 else 1, np.int16(p1), p2_lut)
-    del cost
-    disp, disp_r = _winner(down, up, float(uniqueness), bool(subpixel))
-    del down, up
+    down = np.empty(cost.shape, np.uint16)
+    up = np.empty(cost.shape, np.uint16)
+    _aggregate(cost, gl, 3 if paths == 8 else 1, np.int16(p1), p2_lut, down, up)
+    disp, disp_r = _winner(cost, down, up, gl, np.int16(p1), p2_lut, float(uniqueness), bool(subpixel))
+    del cost, down, up
     if lr_max_diff >= 0:
         _lr_check(disp, disp_r, float(lr_max_diff))
     if speckle_size > 0:
