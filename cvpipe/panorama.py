@@ -4,7 +4,8 @@ The stages, in the order :func:`stitch` runs them (each is a pure function so th
 
 1. :func:`working_images` shrinks the inputs to the registration resolution (like ``cv2.Stitcher``'s
    ``registrationResol``) and :func:`detect_all` finds features there.
-2. :func:`match_graph` matches every pair, fits a homography with :func:`cvpipe.homography.find_homography` and keeps
+2. :func:`match_graph` matches the candidate pairs (:func:`candidate_pairs`; float descriptors by exact brute force,
+   :func:`ratio_matches`), fits a homography with :func:`cvpipe.homography.find_homography` and keeps
    an edge when its confidence ``inliers / (8 + 0.3 * matches)`` (Brown & Lowe's probabilistic check, also
    OpenCV's) and its inlier count pass, and the homography is plausible (orientation kept, bounded scale change).
 3. :func:`register` keeps the largest connected component (the other images are dropped with a reason), picks the
@@ -379,11 +380,9 @@ def match_graph(feats: Sequence[Features], sizes: Sequence[tuple[int, int]], *, 
         else:
             edges[(i, j)] = Edge(i, j, fit.H / fit.H[2, 2], src[fit.inliers], dst[fit.inliers], conf)
 
-    # one FLANN index per image, built once and queried by each of its partners (not once per pair)
-    index: dict[int, MatchIndex] = {}
-
     # binary descriptors: one Hamming index per image, built once and queried by each of its partners; float
     # descriptors: exact brute force by a matrix product (faster than FLANN at these sizes)
+    index: dict[int, MatchIndex] = {}
     binary = any(f.binary for f in feats)
 
     def full_match(ij):
