@@ -241,6 +241,10 @@ def candidate_pairs(feats: Sequence[Features], ratio: float, candidates: int) ->
     return sorted(keep), {ij: int(C[ij]) for ij in everything if ij not in keep}
 
 
+#: most entries of one block of the query x train distance matrix in :func:`nearest_two` (16 M float32 = 64 MB)
+DISTANCE_BLOCK = 1 << 24
+
+
 def nearest_two(query: np.ndarray, train: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact nearest and second-nearest neighbours in ``train`` of every row of ``query`` (brute force).
 
@@ -261,15 +265,22 @@ def nearest_two(query: np.ndarray, train: np.ndarray) -> tuple[np.ndarray, np.nd
     """
     q = np.ascontiguousarray(query, np.float32)
     t = np.ascontiguousarray(train, np.float32)
-    d = cv2.gemm(q, t, -2.0, None, 0.0, flags=cv2.GEMM_2_T)
-    d += np.einsum("ij,ij->i", t, t)[None, :]
-    nearest = np.argmin(d, axis=1)
-    rows = np.arange(len(q))
-    d1 = d[rows, nearest].copy()
-    d[rows, nearest] = np.inf
-    d2 = d.min(axis=1)
+    tt = np.einsum("ij,ij->i", t, t)[None, :]
+    nearest = np.empty(len(q), np.int64)
+    d1 = np.empty(len(q), np.float32)
+    d2 = np.empty(len(q), np.float32)
+    step = max(1, DISTANCE_BLOCK // max(len(t), 1))
+    for lo in range(0, len(q), step):
+        d = cv2.gemm(q[lo:lo + step], t, -2.0, None, 0.0, flags=cv2.GEMM_2_T)
+        d += tt
+        best = np.argmin(d, axis=1)
+        rows = np.arange(len(d))
+        nearest[lo:lo + step] = best
+        d1[lo:lo + step] = d[rows, best]
+        d[rows, best] = np.inf
+        d2[lo:lo + step] = d.min(axis=1)
     qq = np.einsum("ij,ij->i", q, q)
-    return nearest.astype(np.int64), np.maximum(d1 + qq, 0), np.maximum(d2 + qq, 0)
+    return nearest, np.maximum(d1 + qq, 0), np.maximum(d2 + qq, 0)
 
 
 def ratio_matches(query: np.ndarray, train: np.ndarray, ratio: float) -> np.ndarray:

@@ -362,7 +362,9 @@ def _sift_like(rng, n, d=128):
     return rng.integers(0, 256, (n, d)).astype(np.float32)
 
 
-def test_nearest_two_and_ratio_matches_equal_brute_force():
+@pytest.mark.parametrize("block", [panorama.DISTANCE_BLOCK, 4000])
+def test_nearest_two_and_ratio_matches_equal_brute_force(block, monkeypatch):
+    monkeypatch.setattr(panorama, "DISTANCE_BLOCK", block)  # 4000 entries: the query in blocks of 10 rows
     rng = np.random.default_rng(0)
     q, t = _sift_like(rng, 300), _sift_like(rng, 400)
     t[:50] = q[:50] + rng.integers(-3, 4, (50, 128))  # 50 true matches among random descriptors
