@@ -100,7 +100,8 @@ def _popcount(v):  # pragma: no cover - compiled
 
 @njit(cache=True, parallel=True)
 def _cost_volume(cen_l, cen_r, planes_l, planes_r, ad_cap, ad_mult, invalid_cost, cost):  # pragma: no cover
-    """Fill ``cost`` (H, W, D) uint8 with the matching cost: census Hamming distance + (min(sum_c |L_c - R_c|, ad_cap) * ad_mult) >> 16.
+    """Fill ``cost`` (H, W, D) uint8 with the matching cost: census Hamming distance
+    + (min(sum_c |L_c - R_c|, ad_cap) * ad_mult) >> 16, and ``invalid_cost`` where x - d < 0.
 
     ``planes_*`` are (C, H, W) int16 channel planes; ``ad_mult`` = 0 skips the absolute-difference term. The right
     image's rows are reversed once so that the candidates x - d, d = 0, 1, ... of a pixel are a forward slice,
@@ -122,19 +123,29 @@ def _cost_volume(cen_l, cen_r, planes_l, planes_r, ad_cap, ad_mult, invalid_cost
             # unsigned indices instead of per-pixel views: a view costs two atomic reference-count updates and a
             # signed base + d a wraparound test per load (either one kept this kernel 2-3x slower)
             base = np.uint64(w - 1 - x)
-            for d in range(nd):
-                cost[y, x, d] = np.uint8(_popcount(cl ^ rev[base + np.uint64(d)]))
+            if ad_mult > 0 and nch == 3:
+                # colour: the whole cost in one loop (the common case; about 20 % faster than a loop per channel)
+                l0 = np.int32(planes_l[0, y, x])
+                l1 = np.int32(planes_l[1, y, x])
+                l2 = np.int32(planes_l[2, y, x])
+                for d in range(nd):
+                    i = base + np.uint64(d)
+                    ad = (abs(l0 - rev_planes[0, i]) + abs(l1 - rev_planes[1, i]) + abs(l2 - rev_planes[2, i]))
+                    cost[y, x, d] = np.uint8(_popcount(cl ^ rev[i]) + ((min(ad, ad_cap) * ad_mult) >> 16))
+            else:
+                for d in range(nd):
+                    cost[y, x, d] = np.uint8(_popcount(cl ^ rev[base + np.uint64(d)]))
+                if ad_mult > 0:
+                    for d in range(nd):
+                        adsum[d] = 0
+                    for c in range(nch):
+                        lv = np.int32(planes_l[c, y, x])
+                        for d in range(nd):
+                            adsum[d] += abs(lv - rev_planes[c, base + np.uint64(d)])
+                    for d in range(nd):
+                        cost[y, x, d] += np.uint8((min(adsum[d], ad_cap) * ad_mult) >> 16)
             for d in range(nd, max_disp):
                 cost[y, x, d] = invalid_cost
-            if ad_mult > 0:
-                for d in range(nd):
-                    adsum[d] = 0
-                for c in range(nch):
-                    lv = np.int32(planes_l[c, y, x])
-                    for d in range(nd):
-                        adsum[d] += abs(lv - rev_planes[c, base + np.uint64(d)])
-                for d in range(nd):
-                    cost[y, x, d] += np.uint8((min(adsum[d], ad_cap) * ad_mult) >> 16)
     return cost
 
 
@@ -241,37 +252,55 @@ def _aggregate(cost, gray, nk, p1, p2_lut, down, up):  # pragma: no cover - comp
 
 @njit(cache=True, parallel=True)
 def _winner(cost, down, up, gray, p1, p2_lut, uniqueness, subpixel):  # pragma: no cover - compiled
-    """Add the two horizontal paths of every row (rows in parallel) to ``down`` + ``up`` into the row's aggregated
-    cost S (W, D), and take its winner-take-all disparities: the left image's (float32, -1 = rejected) and the
-    right image's (int32), without writing S back to memory.
+    """Add the two horizontal paths of every row to ``down`` + ``up`` into the row's aggregated cost S (W, D), and
+    take its winner-take-all disparities: the left image's (float32, -1 = rejected) and the right image's (int32),
+    without writing S back to memory.
+
+    A horizontal path is a chain of dependent steps, so each thread runs four of them at once (two rows, both
+    directions), which keeps the core busy while each step waits for the previous one.
     """
     h, w, nd = cost.shape
     disp = np.empty((h, w), np.float32)
     disp_r = np.zeros((h, w), np.int32)
-    for y in prange(h):
-        srow = np.empty((w, nd), np.uint16)
-        a = np.full((1, nd + 2), _BIG, np.int16)
-        b = np.full((1, nd + 2), _BIG, np.int16)
-        # two explicit loops: a computed x made LLVM's code 3x slower (measured)
-        m = _path_start(cost, y, 0, a, 0)
+    for i in prange((h + 1) // 2):
+        y0 = 2 * i
+        y1 = min(y0 + 1, h - 1)  # the last row of an odd height is done twice, identically
+        srow = np.empty((2, w, nd), np.uint16)
+        la = np.full((4, nd + 2), _BIG, np.int16)  # path buffers: L->R row 0, L->R row 1, R->L row 0, R->L row 1
+        lb = np.full((4, nd + 2), _BIG, np.int16)
+        for j in range(2):
+            y = y0 + j if j == 0 else y1
+            for x in range(w):
+                for d in range(nd):
+                    srow[j, x, d] = down[y, x, d] + up[y, x, d]
+        m0 = _path_start(cost, y0, 0, la, 0)
+        m1 = _path_start(cost, y1, 0, la, 1)
+        m2 = _path_start(cost, y0, w - 1, la, 2)
+        m3 = _path_start(cost, y1, w - 1, la, 3)
         for d in range(nd):
-            srow[0, d] = down[y, 0, d] + up[y, 0, d] + np.uint16(a[0, d + 1])
+            srow[0, 0, d] += np.uint16(la[0, d + 1])
+            srow[1, 0, d] += np.uint16(la[1, d + 1])
+            srow[0, w - 1, d] += np.uint16(la[2, d + 1])
+            srow[1, w - 1, d] += np.uint16(la[3, d + 1])
         for x in range(1, w):
-            p2e = p2_lut[abs(np.int32(gray[y, x]) - np.int32(gray[y, x - 1]))]
-            m = _path_step(a, 0, m, cost, y, x, p1, p2e, b, 0)
+            xr = w - 1 - x
+            q0 = p2_lut[abs(np.int32(gray[y0, x]) - np.int32(gray[y0, x - 1]))]
+            q1 = p2_lut[abs(np.int32(gray[y1, x]) - np.int32(gray[y1, x - 1]))]
+            q2 = p2_lut[abs(np.int32(gray[y0, xr]) - np.int32(gray[y0, xr + 1]))]
+            q3 = p2_lut[abs(np.int32(gray[y1, xr]) - np.int32(gray[y1, xr + 1]))]
+            m0 = _path_step(la, 0, m0, cost, y0, x, p1, q0, lb, 0)
+            m1 = _path_step(la, 1, m1, cost, y1, x, p1, q1, lb, 1)
+            m2 = _path_step(la, 2, m2, cost, y0, xr, p1, q2, lb, 2)
+            m3 = _path_step(la, 3, m3, cost, y1, xr, p1, q3, lb, 3)
             for d in range(nd):
-                srow[x, d] = down[y, x, d] + up[y, x, d] + np.uint16(b[0, d + 1])
-            a, b = b, a
-        m = _path_start(cost, y, w - 1, a, 0)
-        for d in range(nd):
-            srow[w - 1, d] += np.uint16(a[0, d + 1])
-        for x in range(w - 2, -1, -1):
-            p2e = p2_lut[abs(np.int32(gray[y, x]) - np.int32(gray[y, x + 1]))]
-            m = _path_step(a, 0, m, cost, y, x, p1, p2e, b, 0)
+                srow[0, x, d] += np.uint16(lb[0, d + 1])
+                srow[1, x, d] += np.uint16(lb[1, d + 1])
             for d in range(nd):
-                srow[x, d] += np.uint16(b[0, d + 1])
-            a, b = b, a
-        _winner_row(srow, y, uniqueness, subpixel, disp, disp_r)
+                srow[0, xr, d] += np.uint16(lb[2, d + 1])
+                srow[1, xr, d] += np.uint16(lb[3, d + 1])
+            la, lb = lb, la
+        _winner_row(srow[0], y0, uniqueness, subpixel, disp, disp_r)
+        _winner_row(srow[1], y1, uniqueness, subpixel, disp, disp_r)
     return disp, disp_r
 
 
