@@ -107,7 +107,7 @@ def _cost_volume(cen_l, cen_r, planes_l, planes_r, ad_cap, ad_mult, invalid_cost
     + (min(sum_c |L_c - R_c|, ad_cap) * ad_mult) >> 16, and ``invalid_cost`` where x - d < 0.
 
     ``planes_*`` are (C, H, W) int16 channel planes; ``ad_mult`` = 0 skips the absolute-difference term. The right
-    image's rows are reversed once so that the candidates x - d, d = 0, 1, ... of a pixel are a forward slice,
+    image's rows are reversed once so that the candidates x - d, d = 0, 1, ... of a pixel are consecutive forward,
     which LLVM vectorizes (a negative index expression would need numba's wraparound check).
     """
     h, w = cen_l.shape
@@ -123,8 +123,8 @@ def _cost_volume(cen_l, cen_r, planes_l, planes_r, ad_cap, ad_mult, invalid_cost
         for x in range(w):
             cl = cen_l[y, x]
             nd = min(max_disp, x + 1)
-            # unsigned indices instead of per-pixel views: a view costs two atomic reference-count updates and a
-            # signed base + d a wraparound test per load (either one kept this kernel 2-3x slower)
+            # unsigned indices: a signed base + d would cost numba's wraparound test per load (no per-pixel views,
+            # which cost two atomic reference-count updates each)
             base = np.uint64(w - 1 - x)
             if ad_mult > 0 and nch == 3:
                 # colour: the whole cost in one loop (the common case; about 20 % faster than a loop per channel)
