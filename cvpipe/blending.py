@@ -133,6 +133,11 @@ def seam_lines(labels: np.ndarray) -> np.ndarray:
     return out
 
 
+def _three(a: np.ndarray) -> np.ndarray:
+    """A (H, W) float32 array repeated into 3 channels (OpenCV's arithmetic wants equal channel counts)."""
+    return cv2.merge([a, a, a])
+
+
 def blend_multiband(w: Warped, labels: np.ndarray, bands: int, gains: np.ndarray | None = None) -> np.ndarray:
     """Multi-band (Laplacian pyramid) blending of the seam regions.
 
@@ -167,7 +172,8 @@ def blend_multiband(w: Warped, labels: np.ndarray, bands: int, gains: np.ndarray
     bx = np.array(boxes)
     gx0, gy0, gx1, gy1 = bx[:, 0].min(), bx[:, 1].min(), bx[:, 2].max(), bx[:, 3].max()
     acc = [np.zeros(((gy1 - gy0) >> k, (gx1 - gx0) >> k, 3), np.float32) for k in range(bands + 1)]
-    wsum = [np.zeros(((gy1 - gy0) >> k, (gx1 - gx0) >> k), np.float32) for k in range(bands + 1)]
+    # level 0 needs no weight sum: the seam labels give every covered pixel to exactly one image
+    wsum = [None] + [np.zeros(((gy1 - gy0) >> k, (gx1 - gx0) >> k), np.float32) for k in range(1, bands + 1)]
     for k, (img, mask, (x, y), (ax0, ay0, ax1, ay1)) in enumerate(zip(w.images, w.masks, w.corners, boxes)):
         h, ww = mask.shape
         sub = np.zeros((ay1 - ay0, ax1 - ax0, 3), np.float32)
@@ -175,33 +181,46 @@ def blend_multiband(w: Warped, labels: np.ndarray, bands: int, gains: np.ndarray
         weight = np.zeros_like(m)
         sl = (slice(y - ay0, y - ay0 + h), slice(x - ax0, x - ax0 + ww))
         im = img if img.ndim == 3 else cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
-        sub[sl] = im.astype(np.float32) * np.float32(g[k])
+        # warped images are 0 outside their mask, so image * mask is the gained image itself
+        np.multiply(im, np.float32(g[k]), out=sub[sl], casting="unsafe")
         m[sl] = mask > 0
-        weight[sl] = labels[y:y + h, x:x + ww] == k
+        own = labels[y:y + h, x:x + ww] == k
+        weight[sl] = own
         # normalised pyramids (image * mask and mask blurred together, then divided) extend each level smoothly
         # past the image border, so no artificial black edge leaks into the blend
-        gm, gw = sub * m[..., None], m
-        norm = gm / np.maximum(gw, 1e-6)[..., None]
+        gm, gw, norm = sub, m, sub
         for lev in range(bands + 1):
             if lev < bands:
                 gm, gw = cv2.pyrDown(gm), cv2.pyrDown(gw)
-                nxt = gm / np.maximum(gw, 1e-6)[..., None]
-                lap = norm - cv2.pyrUp(nxt, dstsize=(norm.shape[1], norm.shape[0]))
+                nxt = cv2.divide(gm, _three(np.maximum(gw, 1e-6)))
+                lap = cv2.pyrUp(nxt, dstsize=(norm.shape[1], norm.shape[0]))
+                cv2.subtract(norm, lap, dst=lap)
             else:
                 lap = norm
             oy, ox = (ay0 - gy0) >> lev, (ax0 - gx0) >> lev
             hh, wl = weight.shape
-            np.multiply(lap, weight[..., None], out=lap)
-            acc[lev][oy:oy + hh, ox:ox + wl] += lap
-            wsum[lev][oy:oy + hh, ox:ox + wl] += weight
+            if lev == 0:  # hard weights: copy this image's own pixels
+                dst = acc[0][oy + sl[0].start:oy + sl[0].stop, ox + sl[1].start:ox + sl[1].stop]
+                cv2.copyTo(lap[sl], own.view(np.uint8), dst)
+            else:
+                cv2.multiply(lap, _three(weight), dst=lap)
+                dst = acc[lev][oy:oy + hh, ox:ox + wl]
+                cv2.add(dst, lap, dst=dst)
+                dst = wsum[lev][oy:oy + hh, ox:ox + wl]
+                cv2.add(dst, weight, dst=dst)
             if lev < bands:
                 weight, norm = cv2.pyrDown(weight), nxt
     out = None
     for lev in range(bands, -1, -1):
-        level = acc[lev] / np.maximum(wsum[lev], 1e-8)[..., None]
-        out = level if out is None else cv2.pyrUp(out, dstsize=(level.shape[1], level.shape[0])) + level
+        level = acc[lev] if lev == 0 else cv2.divide(acc[lev], _three(np.maximum(wsum[lev], 1e-8)))
+        if out is None:
+            out = level
+        else:
+            out = cv2.pyrUp(out, dstsize=(level.shape[1], level.shape[0]))
+            cv2.add(out, level, dst=out)
     out = out[-gy0:-gy0 + H, -gx0:-gx0 + W]
-    pano = np.clip(out + 0.5, 0, 255).astype(np.uint8)
+    # round and saturate to uint8 (convertScaleAbs rounds; negatives are clipped to 0 first)
+    pano = cv2.convertScaleAbs(np.maximum(out, 0))
     pano[labels < 0] = 0
     return pano
 

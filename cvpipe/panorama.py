@@ -4,7 +4,8 @@ The stages, in the order :func:`stitch` runs them (each is a pure function so th
 
 1. :func:`working_images` shrinks the inputs to the registration resolution (like ``cv2.Stitcher``'s
    ``registrationResol``) and :func:`detect_all` finds features there.
-2. :func:`match_graph` matches every pair, fits a homography with :func:`cvpipe.homography.find_homography` and keeps
+2. :func:`match_graph` matches the candidate pairs (:func:`candidate_pairs`; float descriptors by exact brute force,
+   :func:`ratio_matches`), fits a homography with :func:`cvpipe.homography.find_homography` and keeps
    an edge when its confidence ``inliers / (8 + 0.3 * matches)`` (Brown & Lowe's probabilistic check, also
    OpenCV's) and its inlier count pass, and the homography is plausible (orientation kept, bounded scale change).
 3. :func:`register` keeps the largest connected component (the other images are dropped with a reason), picks the
@@ -232,17 +233,97 @@ def candidate_pairs(feats: Sequence[Features], ratio: float, candidates: int) ->
     everything = [(i, j) for i in range(n) for j in range(i + 1, n)]
     if candidates <= 0 or candidates >= n - 1:
         return everything, {}
-    top = [f.descriptors[:PREFILTER_FEATURES] for f in feats]  # features are sorted by response
-    with ThreadPoolExecutor(_workers()) as pool:
-        counts = list(pool.map(lambda ij: len(match(top[ij[0]], top[ij[1]], ratio=ratio)), everything))
-    C = np.zeros((n, n), np.int64)
-    for (i, j), c in zip(everything, counts):
-        C[i, j] = C[j, i] = c
+    C = prefilter_counts([f.descriptors[:PREFILTER_FEATURES] for f in feats], ratio)  # sorted by response
     keep = set()
     for i in range(n):
         order = [j for j in np.argsort(-C[i], kind="stable") if j != i][:candidates]
         keep.update((min(i, int(j)), max(i, int(j))) for j in order)
     return sorted(keep), {ij: int(C[ij]) for ij in everything if ij not in keep}
+
+
+#: most entries of one block of the query x train distance matrix in :func:`nearest_two` (16 M float32 = 64 MB)
+DISTANCE_BLOCK = 1 << 24
+
+
+def nearest_two(query: np.ndarray, train: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact nearest and second-nearest neighbours in ``train`` of every row of ``query`` (brute force).
+
+    The squared distances come from one matrix product, ``|q|^2 + |t|^2 - 2 q t^T`` (``cv2.gemm``), which on
+    1500 x 1500 SIFT descriptors is about twice as fast as FLANN's approximate search and exact.
+
+    Parameters
+    ----------
+    query : (Nq, D) float32
+    train : (Nt, D) float32, Nt >= 2
+
+    Returns
+    -------
+    nearest : (Nq,) int64
+        Index into ``train`` of each query's nearest neighbour.
+    d1, d2 : (Nq,) float32
+        Squared L2 distances to the nearest and the second nearest.
+    """
+    q = np.ascontiguousarray(query, np.float32)
+    t = np.ascontiguousarray(train, np.float32)
+    tt = np.einsum("ij,ij->i", t, t)[None, :]
+    nearest = np.empty(len(q), np.int64)
+    d1 = np.empty(len(q), np.float32)
+    d2 = np.empty(len(q), np.float32)
+    step = max(1, DISTANCE_BLOCK // max(len(t), 1))
+    for lo in range(0, len(q), step):
+        d = cv2.gemm(q[lo:lo + step], t, -2.0, None, 0.0, flags=cv2.GEMM_2_T)
+        d += tt
+        best = np.argmin(d, axis=1)
+        rows = np.arange(len(d))
+        nearest[lo:lo + step] = best
+        d1[lo:lo + step] = d[rows, best]
+        d[rows, best] = np.inf
+        d2[lo:lo + step] = d.min(axis=1)
+    qq = np.einsum("ij,ij->i", q, q)
+    return nearest, np.maximum(d1 + qq, 0), np.maximum(d2 + qq, 0)
+
+
+def ratio_matches(query: np.ndarray, train: np.ndarray, ratio: float) -> np.ndarray:
+    """Exact ratio-test matches of float descriptors (:func:`nearest_two`), as :meth:`MatchIndex.query` returns
+    them: (M, 2) int64 pairs ``[i_query, i_train]`` sorted by distance, best first."""
+    if len(query) == 0 or len(train) < 2:  # no second neighbour: the generic matcher's conventions
+        return match(query, train, ratio=ratio, binary=False)
+    nearest, d1, d2 = nearest_two(query, train)
+    keep = np.nonzero(d1 < ratio * ratio * d2)[0]
+    keep = keep[np.argsort(d1[keep], kind="stable")]
+    return np.column_stack([keep, nearest[keep]]).astype(np.int64)
+
+
+def prefilter_counts(descriptors: Sequence[np.ndarray], ratio: float) -> np.ndarray:
+    """Ratio-test match counts between every pair of small descriptor sets, by exact brute force.
+
+    Parameters
+    ----------
+    descriptors : sequence of (n_i, D)
+        One (small) descriptor set per image; float descriptors use the L2 distance, uint8 ones are packed bits
+        (Hamming distance).
+    ratio : float
+        Lowe's ratio test (nearest < ``ratio`` * second nearest).
+
+    Returns
+    -------
+    (N, N) int64
+        Symmetric; entry (i, j), i < j, counts the descriptors of image i whose nearest neighbour in image j
+        passes the ratio test.
+    """
+    n = len(descriptors)
+    C = np.zeros((n, n), np.int64)
+    binary = any(np.asarray(d).dtype == np.uint8 for d in descriptors)
+    # the squared L2 distance of bit-unpacked 0/1 vectors is their Hamming distance, which the ratio test compares
+    # directly; squared L2 distances of float descriptors compare with ratio^2
+    desc = [np.unpackbits(np.asarray(d, np.uint8), axis=1) if binary else d for d in descriptors]
+    r = ratio if binary else ratio * ratio
+    for i in range(n):
+        for j in range(i + 1, n):
+            if len(desc[i]) and len(desc[j]) >= 2:
+                _, d1, d2 = nearest_two(desc[i], desc[j])
+                C[i, j] = C[j, i] = int(np.sum(d1 < r * d2))
+    return C
 
 
 def match_graph(feats: Sequence[Features], sizes: Sequence[tuple[int, int]], *, ratio: float,
@@ -310,17 +391,23 @@ def match_graph(feats: Sequence[Features], sizes: Sequence[tuple[int, int]], *, 
         else:
             edges[(i, j)] = Edge(i, j, fit.H / fit.H[2, 2], src[fit.inliers], dst[fit.inliers], conf)
 
-    # one FLANN index per image, built once and queried by each of its partners (not once per pair)
+    # binary descriptors: one Hamming index per image, built once and queried by each of its partners; float
+    # descriptors: exact brute force by a matrix product (faster than FLANN at these sizes)
     index: dict[int, MatchIndex] = {}
+    binary = any(f.binary for f in feats)
 
     def full_match(ij):
-        if ij[1] not in index:
-            index[ij[1]] = MatchIndex(feats[ij[1]].descriptors)
-        return index[ij[1]].query(feats[ij[0]].descriptors, ratio=ratio)
+        i, j = ij
+        if not binary:
+            return ratio_matches(feats[i].descriptors, feats[j].descriptors, ratio)
+        if j not in index:
+            index[j] = MatchIndex(feats[j].descriptors)
+        return index[j].query(feats[i].descriptors, ratio=ratio)
 
-    with ThreadPoolExecutor(_workers()) as pool:  # OpenCV's matchers release the GIL
-        trains = sorted({j for _, j in todo})
-        index.update(zip(trains, pool.map(lambda j: MatchIndex(feats[j].descriptors), trains)))
+    with ThreadPoolExecutor(_workers()) as pool:  # OpenCV's matchers and gemm release the GIL
+        if binary:
+            trains = sorted({j for _, j in todo})
+            index.update(zip(trains, pool.map(lambda j: MatchIndex(feats[j].descriptors), trains)))
         for (i, j), pairs in zip(todo, pool.map(full_match, todo)):
             verify(i, j, pairs)
     # the prefilter may miss the only link between two groups: try the skipped pairs that would join two
@@ -488,18 +575,6 @@ def _solve(blocks: list, homs, x0: np.ndarray, columns, T: dict | None = None,
     src_h = np.column_stack([src, np.ones(len(src))])
     dst_h = np.column_stack([dst, np.ones(len(dst))])
     n = len(src)
-    rows, cols = [], []
-    for k, blk in enumerate(blocks):  # residual rows of edge k: forward 2p, 2p+1 and backward 2n + 2p, 2n + 2p + 1
-        pts = np.nonzero(edge == k)[0]
-        r = np.concatenate([2 * pts, 2 * pts + 1, 2 * n + 2 * pts, 2 * n + 2 * pts + 1])
-        for a in blk[:2]:
-            c = columns(a)
-            if len(c):
-                rows.append(np.repeat(r, len(c)))
-                cols.append(np.tile(np.asarray(c), len(r)))
-    sparsity = coo_matrix((np.ones(sum(len(r) for r in rows), np.int8), (np.concatenate(rows), np.concatenate(cols))),
-                          shape=(4 * n, len(x0))).tocsr()
-    sparsity.data[:] = 1
 
     def residuals(x):
         H = homs(x)
@@ -510,6 +585,19 @@ def _solve(blocks: list, homs, x0: np.ndarray, columns, T: dict | None = None,
         return np.concatenate([(fwd[:, :2] / fwd[:, 2:] - dst).ravel(), (bwd[:, :2] / bwd[:, 2:] - src).ravel()])
 
     if T is None:
+        # residual rows of edge k: forward 2p, 2p+1 and backward 2n + 2p, 2n + 2p + 1
+        rows, cols = [], []
+        for k, blk in enumerate(blocks):
+            pts = np.nonzero(edge == k)[0]
+            r = np.concatenate([2 * pts, 2 * pts + 1, 2 * n + 2 * pts, 2 * n + 2 * pts + 1])
+            for a in blk[:2]:
+                c = columns(a)
+                if len(c):
+                    rows.append(np.repeat(r, len(c)))
+                    cols.append(np.tile(np.asarray(c), len(r)))
+        sparsity = coo_matrix((np.ones(sum(len(r) for r in rows), np.int8),
+                               (np.concatenate(rows), np.concatenate(cols))), shape=(4 * n, len(x0))).tocsr()
+        sparsity.data[:] = 1
         sp = sparsity.tocsc()
 
         def jac(x):  # forward differences, one column at a time (used for the few rotation parameters)
@@ -524,36 +612,50 @@ def _solve(blocks: list, homs, x0: np.ndarray, columns, T: dict | None = None,
             r, c, v = (np.concatenate([t[m] for t in cols]) for m in range(3))
             return coo_matrix((v, (r, c)), shape=(4 * n, len(x))).tocsr()
     else:
-        Ts = np.stack([T[a] for a in keys])
-        col0 = np.array([columns(a)[0] if len(columns(a)) else -1 for a in keys])
-        pi, pj = e_i[edge], e_j[edge]
-        rows2 = np.arange(2 * n).reshape(n, 2)
+        col0 = {a: (columns(a)[0] if len(columns(a)) else -1) for a in keys}
+        bounds = np.searchsorted(edge, np.arange(len(blocks) + 1))  # points are stored edge by edge
+        C_ref = Tr_inv
 
-        def part(Hs, Hinv, a, b, pts_h, row_off):
-            # residual proj(H_b^-1 H_a p) - q: derivatives w.r.t. Hn_a (source) and Hn_b (target)
-            u = np.einsum("nij,nj->ni", Hinv[b] @ Hs[a], pts_h)
-            P = np.zeros((n, 2, 3))
-            P[:, 0, 0] = P[:, 1, 1] = 1 / u[:, 2]
-            P[:, :, 2] = -u[:, :2] / u[:, 2:] ** 2
-            B = P @ (Hinv[b] @ Tr_inv)
-            q = np.einsum("nij,nj->ni", Ts[a], pts_h)
-            w = np.einsum("nij,nj->ni", Ts[b], u)
-            out = []
-            for node, vec, sign in ((a, q, 1.0), (b, w, -1.0)):
-                vals = (sign * B[:, :, :, None] * vec[:, None, None, :]).reshape(n, 2, 9)[:, :, :8]
-                keep = col0[node] >= 0
-                r = np.broadcast_to((rows2 + row_off)[:, :, None], (n, 2, 8))[keep]
-                c = (col0[node][:, None, None] + np.arange(8)[None, None, :]).repeat(2, axis=1)[keep]
-                out.append((r.ravel(), c.ravel(), vals[keep].ravel()))
-            return out
+        def derivatives(Ha, Hb_inv, Ta, Tb, pts_h):
+            # residual proj(H_b^-1 H_a p) - q of one edge: (2m, 8) derivatives w.r.t. Hn_a (source), Hn_b (target)
+            u = pts_h @ (Hb_inv @ Ha).T
+            iw = 1.0 / u[:, 2:]
+            C = Hb_inv @ C_ref
+            B = np.stack([(C[0] - u[:, :1] * iw * C[2]) * iw, (C[1] - u[:, 1:2] * iw * C[2]) * iw], axis=1)
+            q, w = pts_h @ Ta.T, u @ Tb.T
+            Ja = (B[:, :, :, None] * q[:, None, None, :]).reshape(-1, 9)[:, :8]
+            Jb = -(B[:, :, :, None] * w[:, None, None, :]).reshape(-1, 9)[:, :8]
+            return Ja, Jb
 
-        def jac(x):
+        def normal(x, r):
+            # J^T J and J^T r accumulated edge by edge in dense (8, 8) blocks: a residual touches two images only
             H = homs(x)
-            Hs = np.stack([H[a] for a in keys])
-            Hinv = np.linalg.inv(Hs)
-            parts = part(Hs, Hinv, pi, pj, src_h, 0) + part(Hs, Hinv, pj, pi, dst_h, 2 * n)
-            r, c, v = (np.concatenate([p_[k] for p_ in parts]) for k in range(3))
-            return coo_matrix((v, (r, c)), shape=(4 * n, len(x0))).tocsr()
+            Hinv = {a: np.linalg.inv(H[a]) for a in keys}
+            A = np.zeros((len(x0), len(x0)))
+            g = np.zeros(len(x0))
+            fwd, bwd = r[:2 * n], r[2 * n:]
+            for k, blk in enumerate(blocks):
+                lo, hi = bounds[k], bounds[k + 1]
+                for a, b, pts_h, res in ((blk[0], blk[1], src_h[lo:hi], fwd[2 * lo:2 * hi]),
+                                         (blk[1], blk[0], dst_h[lo:hi], bwd[2 * lo:2 * hi])):
+                    Ja, Jb = derivatives(H[a], Hinv[b], T[a], T[b], pts_h)
+                    ca, cb = col0[a], col0[b]
+                    if ca >= 0:
+                        A[ca:ca + 8, ca:ca + 8] += Ja.T @ Ja
+                        g[ca:ca + 8] += Ja.T @ res
+                    if cb >= 0:
+                        A[cb:cb + 8, cb:cb + 8] += Jb.T @ Jb
+                        g[cb:cb + 8] += Jb.T @ res
+                    if ca >= 0 and cb >= 0:
+                        cross = Ja.T @ Jb
+                        A[ca:ca + 8, cb:cb + 8] += cross
+                        A[cb:cb + 8, ca:ca + 8] += cross.T
+            return A, g
+
+        x = levenberg_marquardt(residuals, None, x0, normal=normal)
+        if not np.all(np.isfinite(x)):
+            raise EstimationError("homography refinement diverged; set `refine: none` or raise `min_inliers`")
+        return x
 
     x = levenberg_marquardt(residuals, jac, x0)
     if not np.all(np.isfinite(x)):
@@ -571,12 +673,15 @@ def _cholesky_solve(A: np.ndarray, b: np.ndarray) -> np.ndarray | None:
     return x if ok and np.all(np.isfinite(x)) else None
 
 
-def levenberg_marquardt(fun, jac, x0: np.ndarray, max_iter: int = 30, ftol: float = 1e-7) -> np.ndarray:
+def levenberg_marquardt(fun, jac, x0: np.ndarray, max_iter: int = 30, ftol: float = 1e-7,
+                        normal=None) -> np.ndarray:
     """Minimise ``|fun(x)|^2`` by Levenberg-Marquardt on the normal equations.
 
-    ``jac(x)`` returns the sparse (m, n) Jacobian. With n in the hundreds and m in the tens of thousands, forming
-    ``J^T J`` once per iteration is far cheaper than an iterative trust-region solver (``least_squares``' LSMR does
-    hundreds of length-m vector operations per step, which thread-contended BLAS makes slow on a shared machine).
+    ``jac(x)`` returns the sparse (m, n) Jacobian; alternatively ``normal(x, r)`` returns ``(J^T J, J^T r)``
+    directly (dense (n, n) and (n,)), for problems whose structure gives them without forming ``J``. With n in
+    the hundreds and m in the tens of thousands, forming ``J^T J`` once per iteration is far cheaper than an
+    iterative trust-region solver (``least_squares``' LSMR does hundreds of length-m vector operations per step,
+    which thread-contended BLAS makes slow on a shared machine).
     Marquardt's scaling by ``diag(J^T J)`` makes the step invariant to the parameter units.
 
     Returns
@@ -589,9 +694,11 @@ def levenberg_marquardt(fun, jac, x0: np.ndarray, max_iter: int = 30, ftol: floa
     cost = float(r @ r)
     lam = 1e-4
     for _ in range(max_iter):
-        J = jac(x)
-        A = (J.T @ J).toarray()
-        g = J.T @ r
+        if normal is not None:
+            A, g = normal(x, r)
+        else:
+            J = jac(x)
+            A, g = (J.T @ J).toarray(), J.T @ r
         d = np.diag(A).copy()
         d[d <= 0] = 1.0
         while lam < 1e10:
@@ -907,6 +1014,9 @@ class Panorama:
         Rectangle cut from the blended canvas.
     timings : dict str -> float
         Seconds per step.
+    graph : MatchGraph
+        The pairwise match graph (at the registration resolution ``graph.sizes``): every accepted pair's own
+        homography, before any global model.
     """
 
     image: np.ndarray
@@ -917,6 +1027,7 @@ class Panorama:
     to_panorama: np.ndarray
     crop: tuple
     timings: dict
+    graph: MatchGraph | None = None
 
 
 def _check_images(images: Sequence[np.ndarray]) -> None:
@@ -997,7 +1108,7 @@ def stitch(images: Sequence[np.ndarray], features: PanoramaFeaturesParams = Pano
     for k, a in enumerate(reg.used):
         H_full[a] = comp.G[k] @ resize_matrix(full_sizes[a], comp.sizes[k])
     return Panorama(pano[y:y + h, x:x + w], mask[y:y + h, x:x + w], seams[y:y + h, x:x + w], reg, H_full,
-                    to_pano, tuple(int(v) for v in rect), t)
+                    to_pano, tuple(int(v) for v in rect), t, graph)
 
 
 @dataclass(frozen=True)

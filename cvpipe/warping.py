@@ -88,36 +88,45 @@ def image_to_canvas(pts: np.ndarray, G: np.ndarray, projection: str, focal: floa
 
 def canvas_to_image(u: np.ndarray, v: np.ndarray, G: np.ndarray, projection: str, focal: float,
                     ref_size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Image pixels seen at panorama coordinates ``(u, v)`` (arrays of any equal shape).
+    """Image pixels seen at panorama coordinates ``(u, v)``.
+
+    ``u`` and ``v`` are broadcast against each other: a row ``u`` of shape (1, W) and a column ``v`` of shape
+    (H, 1) give the (H, W) maps of a whole canvas box while evaluating the trigonometry once per column and row.
 
     Returns
     -------
-    x, y : float64 arrays shaped like ``u``
+    x, y : float arrays of the broadcast shape (float32 when ``u`` is float32)
         Image pixel coordinates.
     ok : bool array
         False where the ray is behind the image's camera.
     """
     check_projection(projection)
-    Ginv = np.linalg.inv(G)
+    u, v = np.asarray(u), np.asarray(v)
+    dtype = np.float32 if u.dtype == np.float32 else np.float64
+    M = np.linalg.inv(G)
+    # a ray is (alpha(u) gamma(v), beta(v), chi(u) gamma(v)), so every map coordinate is
+    # gamma(v) * (m0 alpha(u) + m2 chi(u)) + m1 beta(v): one outer product per coordinate
     if projection == "plane":
-        M = Ginv
-        a, b, c = u, v, np.float32(1) if u.dtype == np.float32 else 1.0
+        alpha, chi, beta, gamma = u, np.ones_like(u), v, None
     else:
-        M = Ginv @ camera_matrix(focal, ref_size)
-        focal = np.asarray(focal, np.asarray(u).dtype)
-        theta = u / focal
+        M = M @ camera_matrix(focal, ref_size)
+        theta = u / dtype(focal)
+        alpha, chi = np.sin(theta), np.cos(theta)
         if projection == "cylindrical":
-            a, b, c = np.sin(theta), v / focal, np.cos(theta)
+            beta, gamma = v / dtype(focal), None
         else:
-            phi = v / focal
-            a, b, c = np.sin(theta) * np.cos(phi), np.sin(phi), np.cos(theta) * np.cos(phi)
-    M = M.astype(np.asarray(u).dtype)
-    z = M[2, 0] * a + M[2, 1] * b + M[2, 2] * c
+            phi = v / dtype(focal)
+            beta, gamma = np.sin(phi), np.cos(phi)
+    M = M.astype(dtype)
+
+    def coordinate(m):
+        h = m[0] * alpha + m[2] * chi
+        return (h if gamma is None else h * gamma) + m[1] * beta
+
+    z = coordinate(M[2])
     ok = z > 1e-12
-    zs = np.where(ok, z, z.dtype.type(1))
-    x = (M[0, 0] * a + M[0, 1] * b + M[0, 2] * c) / zs
-    y = (M[1, 0] * a + M[1, 1] * b + M[1, 2] * c) / zs
-    return x, y, ok
+    zs = np.where(ok, z, dtype(1))
+    return coordinate(M[0]) / zs, coordinate(M[1]) / zs, ok
 
 
 def _border(size: tuple[int, int], per_side: int = 48) -> np.ndarray:
@@ -185,7 +194,8 @@ def warp_image(img: np.ndarray, G: np.ndarray, box: Sequence[int], projection: s
     """
     x0, y0, x1, y1 = (int(b) for b in box)
     # float32 keeps 1e-3 px precision on canvases of thousands of pixels at half the cost
-    u, v = np.meshgrid(np.arange(x0, x1, dtype=np.float32), np.arange(y0, y1, dtype=np.float32))
+    u = np.arange(x0, x1, dtype=np.float32)[None, :]
+    v = np.arange(y0, y1, dtype=np.float32)[:, None]
     x, y, ok = canvas_to_image(u, v, G, projection, focal, ref_size)
     h, w = img.shape[:2]
     # half a pixel of slack: the border samples themselves belong to the image
