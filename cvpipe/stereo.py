@@ -254,10 +254,10 @@ def _aggregate(cost, gray, nk, p1, p2_lut, down, up):  # pragma: no cover - comp
 
 
 @njit(cache=True, parallel=True)
-def _winner(cost, down, up, gray, p1, p2_lut, uniqueness, subpixel):  # pragma: no cover - compiled
+def _winner(cost, down, up, gray, p1, p2_lut, uniqueness, subpixel, lr_max_diff):  # pragma: no cover - compiled
     """Add the two horizontal paths of every row to ``down`` + ``up`` into the row's aggregated cost S (W, D), and
     take its winner-take-all disparities: the left image's (float32, -1 = rejected) and the right image's (int32),
-    without writing S back to memory.
+    without writing S back to memory; then the left-right check of the row (``lr_max_diff`` < 0 disables it).
 
     A horizontal path is a chain of dependent steps, so each thread runs four of them at once (two rows, both
     directions), which keeps the core busy while each step waits for the previous one.
@@ -304,6 +304,10 @@ def _winner(cost, down, up, gray, p1, p2_lut, uniqueness, subpixel):  # pragma: 
             la, lb = lb, la
         _winner_row(srow[0], y0, uniqueness, subpixel, disp, disp_r)
         _winner_row(srow[1], y1, uniqueness, subpixel, disp, disp_r)
+        if lr_max_diff >= 0:
+            _lr_check_row(disp, disp_r, y0, lr_max_diff)
+            if y1 != y0:
+                _lr_check_row(disp, disp_r, y1, lr_max_diff)
     return disp, disp_r
 
 
@@ -358,26 +362,26 @@ def _winner_row(srow, y, uniqueness, subpixel, disp, disp_r):  # pragma: no cove
         disp_r[y, xr] = arg_r[w - 1 - xr]
 
 
-@njit(cache=True)
-def _lr_check(disp, disp_r, max_diff):  # pragma: no cover - compiled
-    """Reject (set to -1) left disparities that the right image's disparity does not confirm within ``max_diff``.
+@njit(cache=True, inline="always")
+def _lr_check_row(disp, disp_r, y, max_diff):  # pragma: no cover - compiled
+    """Reject (set to -1) the left disparities of row ``y`` that the right image's disparity does not confirm within
+    ``max_diff``.
 
     Both integer neighbours of the sub-pixel disparity d are tried (floor and ceil, each compared with the right
     image's disparity at x minus itself); the pixel is kept when either agrees, so sub-pixel refinement does not
     count against the check.
     """
-    h, w = disp.shape
-    for y in range(h):
-        for x in range(w):
-            d = disp[y, x]
-            if d < 0:
-                continue
-            lo = int(d)
-            hi = lo + 1 if d > lo else lo
-            ok_lo = x - lo >= 0 and abs(lo - disp_r[y, x - lo]) <= max_diff
-            ok_hi = x - hi >= 0 and abs(hi - disp_r[y, x - hi]) <= max_diff
-            if not (ok_lo or ok_hi):
-                disp[y, x] = -1.0
+    w = disp.shape[1]
+    for x in range(w):
+        d = disp[y, x]
+        if d < 0:
+            continue
+        lo = int(d)
+        hi = lo + 1 if d > lo else lo
+        ok_lo = x - lo >= 0 and abs(lo - disp_r[y, x - lo]) <= max_diff
+        ok_hi = x - hi >= 0 and abs(hi - disp_r[y, x - hi]) <= max_diff
+        if not (ok_lo or ok_hi):
+            disp[y, x] = -1.0
 
 
 @njit(cache=True)
@@ -577,10 +581,10 @@ def disparity_sgm(
     down = np.empty(cost.shape, np.uint16)
     up = np.empty(cost.shape, np.uint16)
     _aggregate(cost, gl, 3 if paths == 8 else 1, np.int16(p1), p2_lut, down, up)
-    disp, disp_r = _winner(cost, down, up, gl, np.int16(p1), p2_lut, float(uniqueness), bool(subpixel))
+    # the left-right check runs row by row inside _winner (a negative lr_max_diff disables it)
+    disp, _ = _winner(cost, down, up, gl, np.int16(p1), p2_lut, float(uniqueness), bool(subpixel),
+                      float(lr_max_diff))
     del cost, down, up
-    if lr_max_diff >= 0:
-        _lr_check(disp, disp_r, float(lr_max_diff))
     if speckle_size > 0:
         _remove_speckles(disp, int(speckle_size), float(speckle_range))
     if fill:
