@@ -607,7 +607,9 @@ def verify(gallery: Gallery, matches: Matches, scene_xy: np.ndarray, scene_size:
            params: LogoVerifyParams | None = None, rng=None) -> list[Hypothesis]:
     """Fit and check one homography per reference that has at least ``min_matches`` tentative matches.
 
-    When the best RANSAC fit fails the checks, its inliers are set aside and the remaining matches are fitted
+    The fitter is ``params.model`` for float descriptors (SIFT) and ``params.binary_model`` for the binary ones (see
+    :data:`MODELS`): binary detectors put their keypoints in dense clusters on texture, where 3-point affine samples
+    find chance fits more easily than 4-point homographies. When the best RANSAC fit fails the checks, its inliers are set aside and the remaining matches are fitted
     again (at most ``max_models`` fits per reference); the number of fits enters the score's multiple-test count.
 
     Parameters
@@ -634,6 +636,7 @@ def verify(gallery: Gallery, matches: Matches, scene_xy: np.ndarray, scene_size:
     refs = np.unique(matches.ref)
     counts = {int(r): int(np.sum(matches.ref == r)) for r in refs}
     tested = [r for r in refs if counts[int(r)] >= p.min_matches]
+    fitter = MODELS[p.binary_model if gallery.binary else p.model]
     out = []
     for r in tested:
         ref = gallery.references[int(r)]
@@ -649,7 +652,7 @@ def verify(gallery: Gallery, matches: Matches, scene_xy: np.ndarray, scene_size:
             if left.sum() < p.min_matches:
                 break
             try:
-                H, fit_inl = MODELS[p.model](src[left], dst[left], ref, scene_size, p, rng)
+                H, fit_inl = fitter(src[left], dst[left], ref, scene_size, p, rng)
             except EstimationError as exc:
                 if hyp is None:
                     hyp = Hypothesis(brand, int(r), len(src), 0, -np.inf, None, None, none, f"no homography: {exc}")

@@ -489,9 +489,13 @@ class LogoMatchParams:
 
 @dataclass(frozen=True)
 class LogoVerifyParams:
-    """``logo.verify``: homography verification, plausibility checks and the decision threshold."""
+    """``logo.verify``: homography verification, plausibility checks and the decision threshold.
+
+    ``model`` is the geometric fitter for float descriptors (SIFT), ``binary_model`` for ORB, BRISK and AKAZE (see
+    :data:`cvpipe.logos.MODELS`)."""
 
     model: str = "affine_homography"
+    binary_model: str = "homography"
     ransac_threshold: float = 4.0
     max_iters: int = 2000
     affine_samples: int = 500
@@ -507,8 +511,9 @@ class LogoVerifyParams:
 
     def __post_init__(self):
         models = ("affine_homography", "homography")
-        if self.model not in models:
-            raise ValueError(f"`model` must be one of {list(models)}, got {self.model!r}")
+        for name in ("model", "binary_model"):
+            if getattr(self, name) not in models:
+                raise ValueError(f"`{name}` must be one of {list(models)}, got {getattr(self, name)!r}")
         _in_range("ransac_threshold", self.ransac_threshold, 0.0, 100.0, lo_open=True)
         _in_range("max_iters", self.max_iters, 1, 10_000_000)
         _in_range("affine_samples", self.affine_samples, 1, 10_000_000)

@@ -323,6 +323,7 @@ def test_draw_confusion_shape():
     (LogoMatchParams, {"min_features": 2}, "`min_features` must be in"),
     (LogoMatchParams, {"reference_features": 7}, "`reference_features` must be in"),
     (LogoVerifyParams, {"model": "similarity"}, "`model` must be one of"),
+    (LogoVerifyParams, {"binary_model": "affine"}, "`binary_model` must be one of"),
     (LogoVerifyParams, {"affine_samples": 0}, "`affine_samples` must be in"),
     (LogoVerifyParams, {"ransac_threshold": 0.0}, "`ransac_threshold` must be in"),
     (LogoVerifyParams, {"max_iters": 0}, "`max_iters` must be in"),
@@ -469,3 +470,20 @@ def test_leave_one_out_protocol(tmp_path, marks):
     # protocol's
     own = {d["scene"]: d["truth"] for d in detail if d["truth"]}
     assert all(d["best_brand"] != own[d["scene"]] for d in detail if d["truth"] is None)
+
+
+def test_fitter_follows_descriptor_kind(gallery, marks, monkeypatch):
+    """`model` serves SIFT and `binary_model` the binary detectors."""
+    used = []
+    for name, fitter in list(logos.MODELS.items()):
+        monkeypatch.setitem(logos.MODELS, name, lambda *a, _n=name, _f=fitter: used.append(_n) or _f(*a))
+    H = _view((320, 240), 1.0, 15, PERSP)
+    gray = _scene(marks["brand1"], H)
+    vp = LogoVerifyParams(model="affine_homography", binary_model="homography")
+    assert logos.recognize(gallery, detect(gray, "sift"), (640, 480), verify_params=vp, rng=0).brand == "brand1"
+    assert set(used) == {"affine_homography"}
+    used.clear()
+    refs = [logos.Reference(b, b, detect(cv2.cvtColor(m, cv2.COLOR_BGR2GRAY), "orb"), (200, 200))
+            for b, m in marks.items()]
+    det = logos.recognize(logos.build_gallery(refs), detect(gray, "orb"), (640, 480), verify_params=vp, rng=0)
+    assert det.brand == "brand1" and set(used) == {"homography"}
