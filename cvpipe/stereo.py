@@ -272,7 +272,7 @@ def _winner(cost, down, up, gray, p1, p2_lut, uniqueness, subpixel, lr_max_diff)
         la = np.full((4, nd + 2), _BIG, np.int16)  # path buffers: L->R row 0, L->R row 1, R->L row 0, R->L row 1
         lb = np.full((4, nd + 2), _BIG, np.int16)
         for j in range(2):
-            y = y0 + j if j == 0 else y1
+            y = y0 if j == 0 else y1
             for x in range(w):
                 for d in range(nd):
                     srow[j, x, d] = down[y, x, d] + up[y, x, d]
