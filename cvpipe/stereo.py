@@ -70,27 +70,21 @@ def _gray(img: np.ndarray) -> np.ndarray:
 _BIG = 16000
 
 
-@njit(cache=True, parallel=True)
-def _census(pad_l, pad_r, ry, rx):  # pragma: no cover - compiled
-    """Census signatures per pixel of two images padded by (ry, rx), as (2, H, W) uint64 (one parallel launch for
-    both): bit set where the neighbour is darker than the centre, neighbours in row-major order without the centre.
-    """
-    h = pad_l.shape[0] - 2 * ry
-    w = pad_l.shape[1] - 2 * rx
-    out = np.zeros((2, h, w), np.uint64)
-    for i in prange(2 * h):
-        y = i % h
-        padded = pad_l if i < h else pad_r
-        row = out[i // h, y]
-        centre = padded[y + ry, rx:rx + w]
-        for dy in range(2 * ry + 1):
-            for dx in range(2 * rx + 1):
-                if dy == ry and dx == rx:
-                    continue
-                nb = padded[y + dy, dx:dx + w]
-                for x in range(w):
-                    row[x] = (row[x] << np.uint64(1)) | np.uint64(nb[x] < centre[x])
-    return out
+@njit(cache=True, inline="always")
+def _census_row(padded, y, ry, rx, row):  # pragma: no cover - compiled
+    """Census signatures of row ``y`` of an image padded by (ry, rx) into ``row`` (W,) uint64: bit set where the
+    neighbour is darker than the centre, neighbours in row-major order without the centre."""
+    w = row.shape[0]
+    centre = padded[y + ry, rx:rx + w]
+    for x in range(w):
+        row[x] = 0
+    for dy in range(2 * ry + 1):
+        for dx in range(2 * rx + 1):
+            if dy == ry and dx == rx:
+                continue
+            nb = padded[y + dy, dx:dx + w]
+            for x in range(w):
+                row[x] = (row[x] << np.uint64(1)) | np.uint64(nb[x] < centre[x])
 
 
 @njit(cache=True, inline="always")
@@ -102,35 +96,41 @@ def _popcount(v):  # pragma: no cover - compiled
 
 
 @njit(cache=True, parallel=True)
-def _cost_volume(cen_l, cen_r, planes_l, planes_r, ad_cap, ad_mult, invalid_cost, cost):  # pragma: no cover
+def _cost_volume(pad_l, pad_r, ry, rx, planes_l, planes_r, ad_cap, ad_mult, invalid_cost, cost):  # pragma: no cover
     """Fill ``cost`` (H, W, D) uint8 with the matching cost: census Hamming distance
     + (min(sum_c |L_c - R_c|, ad_cap) * ad_mult) >> 16, and ``invalid_cost`` where x - d < 0.
 
-    ``planes_*`` are (C, H, W) int16 channel planes; ``ad_mult`` = 0 skips the absolute-difference term. The right
+    ``pad_*`` are the gray images padded by (ry, rx) for the census window; each row's census signatures are
+    computed where they are used (one parallel launch, no census images in memory).
+
+    ``planes_*`` are the (H, W, C) uint8 images; ``ad_mult`` = 0 skips the absolute-difference term. The right
     image's rows are reversed once so that the candidates x - d, d = 0, 1, ... of a pixel are consecutive forward,
     which LLVM vectorizes (a negative index expression would need numba's wraparound check).
     """
-    h, w = cen_l.shape
-    nch = planes_l.shape[0]
-    max_disp = cost.shape[2]
+    h, w, max_disp = cost.shape
+    nch = planes_l.shape[2]
     for y in prange(h):
-        rev = cen_r[y, ::-1].copy()
+        cen_l = np.empty(w, np.uint64)
+        cen_r = np.empty(w, np.uint64)
+        _census_row(pad_l, y, ry, rx, cen_l)
+        _census_row(pad_r, y, ry, rx, cen_r)
+        rev = cen_r[::-1].copy()
         rev_planes = np.empty((nch, w), np.int32)
         for c in range(nch):
             for i in range(w):
-                rev_planes[c, i] = planes_r[c, y, w - 1 - i]
+                rev_planes[c, i] = planes_r[y, w - 1 - i, c]
         adsum = np.zeros(max_disp, np.int32)
         for x in range(w):
-            cl = cen_l[y, x]
+            cl = cen_l[x]
             nd = min(max_disp, x + 1)
             # unsigned indices: a signed base + d would cost numba's wraparound test per load (no per-pixel views,
             # which cost two atomic reference-count updates each)
             base = np.uint64(w - 1 - x)
             if ad_mult > 0 and nch == 3:
                 # colour: the whole cost in one loop (the common case; about 20 % faster than a loop per channel)
-                l0 = np.int32(planes_l[0, y, x])
-                l1 = np.int32(planes_l[1, y, x])
-                l2 = np.int32(planes_l[2, y, x])
+                l0 = np.int32(planes_l[y, x, 0])
+                l1 = np.int32(planes_l[y, x, 1])
+                l2 = np.int32(planes_l[y, x, 2])
                 for d in range(nd):
                     i = base + np.uint64(d)
                     ad = (abs(l0 - rev_planes[0, i]) + abs(l1 - rev_planes[1, i]) + abs(l2 - rev_planes[2, i]))
@@ -142,7 +142,7 @@ def _cost_volume(cen_l, cen_r, planes_l, planes_r, ad_cap, ad_mult, invalid_cost
                     for d in range(nd):
                         adsum[d] = 0
                     for c in range(nch):
-                        lv = np.int32(planes_l[c, y, x])
+                        lv = np.int32(planes_l[y, x, c])
                         for d in range(nd):
                             adsum[d] += abs(lv - rev_planes[c, base + np.uint64(d)])
                     for d in range(nd):
@@ -272,7 +272,7 @@ def _winner(cost, down, up, gray, p1, p2_lut, uniqueness, subpixel, lr_max_diff)
         la = np.full((4, nd + 2), _BIG, np.int16)  # path buffers: L->R row 0, L->R row 1, R->L row 0, R->L row 1
         lb = np.full((4, nd + 2), _BIG, np.int16)
         for j in range(2):
-            y = y0 + j if j == 0 else y1
+            y = y0 if j == 0 else y1
             for x in range(w):
                 for d in range(nd):
                     srow[j, x, d] = down[y, x, d] + up[y, x, d]
@@ -552,8 +552,8 @@ def disparity_sgm(
         raise ValueError(f"`speckle_range` must be >= 0, got {speckle_range}")
 
     gl, gr = _gray(left), _gray(right)
-    planes_l = np.ascontiguousarray(np.moveaxis(left.reshape(left.shape[0], left.shape[1], -1), 2, 0), np.int16)
-    planes_r = np.ascontiguousarray(np.moveaxis(right.reshape(right.shape[0], right.shape[1], -1), 2, 0), np.int16)
+    planes_l = np.ascontiguousarray(left).reshape(left.shape[0], left.shape[1], -1)  # (H, W, C) views, no copy
+    planes_r = np.ascontiguousarray(right).reshape(right.shape[0], right.shape[1], -1)
     ry, rx = census_size[0] // 2, census_size[1] // 2
     nch = 1 if left.ndim == 2 else 3
     # AD term = ad_weight * min(mean_c |dI_c|, ad_trunc) in 16.16 fixed point on the channel sum
@@ -573,8 +573,8 @@ def disparity_sgm(
     # 4 KiB pages, first-touch page faults on the tens of MB of volumes cost a sizeable share of the run time
     h, w = gl.shape
     cost = np.empty((h, w, int(max_disp)), np.uint8)
-    cen = _census(gl_pad, gr_pad, ry, rx)
-    _cost_volume(cen[0], cen[1], planes_l, planes_r, np.int32(ad_cap), np.int32(ad_mult), np.uint8(c_max), cost)
+    _cost_volume(gl_pad, gr_pad, ry, rx, planes_l, planes_r, np.int32(ad_cap), np.int32(ad_mult), np.uint8(c_max),
+                 cost)
     steps = np.arange(256, dtype=np.float64)
     p2_lut = np.full(256, p2, np.float64) if p2_tau == 0 else np.floor(p2 * p2_tau / (p2_tau + steps))
     p2_lut = np.maximum(p2_lut, p1 + 1).astype(np.int16)
