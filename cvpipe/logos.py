@@ -4,8 +4,8 @@ A gallery holds one or more reference images per brand. Their descriptors are st
 once; every scene descriptor is matched against the whole gallery in one k-nearest-neighbour query, and Lowe's
 ratio test compares the best neighbour of a brand with the best neighbour of any *other* brand (so several
 reference photos of the same brand do not reject each other's matches). Each reference with enough tentative
-matches is verified by a RANSAC homography (:func:`cvpipe.homography.find_homography`) and plausibility checks on
-it: the projected reference outline must be convex and not mirrored, of sane area relative to the scene, without
+matches is verified by a RANSAC homography (:func:`cvpipe.homography.find_homography`; for SIFT by default after an
+affine RANSAC has picked the consistent matches, see :data:`MODELS`) and plausibility checks on it: the projected reference outline must be convex and not mirrored, of sane area relative to the scene, without
 extreme anisotropy or perspective, and the inliers must cover a fair part of the reference.
 
 The score is an a-contrario significance, ``-log10`` of the expected number of equally good chance fits: the
