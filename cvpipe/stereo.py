@@ -70,27 +70,21 @@ def _gray(img: np.ndarray) -> np.ndarray:
 _BIG = 16000
 
 
-@njit(cache=True, parallel=True)
-def _census(pad_l, pad_r, ry, rx):  # pragma: no cover - compiled
-    """Census signatures per pixel of two images padded by (ry, rx), as (2, H, W) uint64 (one parallel launch for
-    both): bit set where the neighbour is darker than the centre, neighbours in row-major order without the centre.
-    """
-    h = pad_l.shape[0] - 2 * ry
-    w = pad_l.shape[1] - 2 * rx
-    out = np.zeros((2, h, w), np.uint64)
-    for i in prange(2 * h):
-        y = i % h
-        padded = pad_l if i < h else pad_r
-        row = out[i // h, y]
-        centre = padded[y + ry, rx:rx + w]
-        for dy in range(2 * ry + 1):
-            for dx in range(2 * rx + 1):
-                if dy == ry and dx == rx:
-                    continue
-                nb = padded[y + dy, dx:dx + w]
-                for x in range(w):
-                    row[x] = (row[x] << np.uint64(1)) | np.uint64(nb[x] < centre[x])
-    return out
+@njit(cache=True, inline="always")
+def _census_row(padded, y, ry, rx, row):  # pragma: no cover - compiled
+    """Census signatures of row ``y`` of an image padded by (ry, rx) into ``row`` (W,) uint64: bit set where the
+    neighbour is darker than the centre, neighbours in row-major order without the centre."""
+    w = row.shape[0]
+    centre = padded[y + ry, rx:rx + w]
+    for x in range(w):
+        row[x] = 0
+    for dy in range(2 * ry + 1):
+        for dx in range(2 * rx + 1):
+            if dy == ry and dx == rx:
+                continue
+            nb = padded[y + dy, dx:dx + w]
+            for x in range(w):
+                row[x] = (row[x] << np.uint64(1)) | np.uint64(nb[x] < centre[x])
 
 
 @njit(cache=True, inline="always")
@@ -102,35 +96,41 @@ def _popcount(v):  # pragma: no cover - compiled
 
 
 @njit(cache=True, parallel=True)
-def _cost_volume(cen_l, cen_r, planes_l, planes_r, ad_cap, ad_mult, invalid_cost, cost):  # pragma: no cover
+def _cost_volume(pad_l, pad_r, ry, rx, planes_l, planes_r, ad_cap, ad_mult, invalid_cost, cost):  # pragma: no cover
     """Fill ``cost`` (H, W, D) uint8 with the matching cost: census Hamming distance
     + (min(sum_c |L_c - R_c|, ad_cap) * ad_mult) >> 16, and ``invalid_cost`` where x - d < 0.
 
-    ``planes_*`` are (C, H, W) int16 channel planes; ``ad_mult`` = 0 skips the absolute-difference term. The right
+    ``pad_*`` are the gray images padded by (ry, rx) for the census window; each row's census signatures are
+    computed where they are used (one parallel launch, no census images in memory).
+
+    ``planes_*`` are the (H, W, C) uint8 images; ``ad_mult`` = 0 skips the absolute-difference term. The right
     image's rows are reversed once so that the candidates x - d, d = 0, 1, ... of a pixel are consecutive forward,
     which LLVM vectorizes (a negative index expression would need numba's wraparound check).
     """
-    h, w = cen_l.shape
-    nch = planes_l.shape[0]
-    max_disp = cost.shape[2]
+    h, w, max_disp = cost.shape
+    nch = planes_l.shape[2]
     for y in prange(h):
-        rev = cen_r[y, ::-1].copy()
+        cen_l = np.empty(w, np.uint64)
+        cen_r = np.empty(w, np.uint64)
+        _census_row(pad_l, y, ry, rx, cen_l)
+        _census_row(pad_r, y, ry, rx, cen_r)
+        rev = cen_r[::-1].copy()
         rev_planes = np.empty((nch, w), np.int32)
         for c in range(nch):
             for i in range(w):
-                rev_planes[c, i] = planes_r[c, y, w - 1 - i]
+                rev_planes[c, i] = planes_r[y, w - 1 - i, c]
         adsum = np.zeros(max_disp, np.int32)
         for x in range(w):
-            cl = cen_l[y, x]
+            cl = cen_l[x]
             nd = min(max_disp, x + 1)
             # unsigned indices: a signed base + d would cost numba's wraparound test per load (no per-pixel views,
             # which cost two atomic reference-count updates each)
             base = np.uint64(w - 1 - x)
             if ad_mult > 0 and nch == 3:
                 # colour: the whole cost in one loop (the common case; about 20 % faster than a loop per channel)
-                l0 = np.int32(planes_l[0, y, x])
-                l1 = np.int32(planes_l[1, y, x])
-                l2 = np.int32(planes_l[2, y, x])
+                l0 = np.int32(planes_l[y, x, 0])
+                l1 = np.int32(planes_l[y, x, 1])
+                l2 = np.int32(planes_l[y, x, 2])
                 for d in range(nd):
                     i = base + np.uint64(d)
                     ad = (abs(l0 - rev_planes[0, i]) + abs(l1 - rev_planes[1, i]) + abs(l2 - rev_planes[2, i]))
@@ -142,7 +142,7 @@ def _cost_volume(cen_l, cen_r, planes_l, planes_r, ad_cap, ad_mult, invalid_cost
                     for d in range(nd):
                         adsum[d] = 0
                     for c in range(nch):
-                        lv = np.int32(planes_l[c, y, x])
+                        lv = np.int32(planes_l[y, x, c])
                         for d in range(nd):
                             adsum[d] += abs(lv - rev_planes[c, base + np.uint64(d)])
                     for d in range(nd):
@@ -254,10 +254,10 @@ def _aggregate(cost, gray, nk, p1, p2_lut, down, up):  # pragma: no cover - comp
 
 
 @njit(cache=True, parallel=True)
-def _winner(cost, down, up, gray, p1, p2_lut, uniqueness, subpixel):  # pragma: no cover - compiled
+def _winner(cost, down, up, gray, p1, p2_lut, uniqueness, subpixel, lr_max_diff):  # pragma: no cover - compiled
     """Add the two horizontal paths of every row to ``down`` + ``up`` into the row's aggregated cost S (W, D), and
     take its winner-take-all disparities: the left image's (float32, -1 = rejected) and the right image's (int32),
-    without writing S back to memory.
+    without writing S back to memory; then the left-right check of the row (``lr_max_diff`` < 0 disables it).
 
     A horizontal path is a chain of dependent steps, so each thread runs four of them at once (two rows, both
     directions), which keeps the core busy while each step waits for the previous one.
@@ -272,7 +272,7 @@ def _winner(cost, down, up, gray, p1, p2_lut, uniqueness, subpixel):  # pragma: 
         la = np.full((4, nd + 2), _BIG, np.int16)  # path buffers: L->R row 0, L->R row 1, R->L row 0, R->L row 1
         lb = np.full((4, nd + 2), _BIG, np.int16)
         for j in range(2):
-            y = y0 + j if j == 0 else y1
+            y = y0 if j == 0 else y1
             for x in range(w):
                 for d in range(nd):
                     srow[j, x, d] = down[y, x, d] + up[y, x, d]
@@ -304,6 +304,10 @@ def _winner(cost, down, up, gray, p1, p2_lut, uniqueness, subpixel):  # pragma: 
             la, lb = lb, la
         _winner_row(srow[0], y0, uniqueness, subpixel, disp, disp_r)
         _winner_row(srow[1], y1, uniqueness, subpixel, disp, disp_r)
+        if lr_max_diff >= 0:
+            _lr_check_row(disp, disp_r, y0, lr_max_diff)
+            if y1 != y0:
+                _lr_check_row(disp, disp_r, y1, lr_max_diff)
     return disp, disp_r
 
 
@@ -358,26 +362,26 @@ def _winner_row(srow, y, uniqueness, subpixel, disp, disp_r):  # pragma: no cove
         disp_r[y, xr] = arg_r[w - 1 - xr]
 
 
-@njit(cache=True)
-def _lr_check(disp, disp_r, max_diff):  # pragma: no cover - compiled
-    """Reject (set to -1) left disparities that the right image's disparity does not confirm within ``max_diff``.
+@njit(cache=True, inline="always")
+def _lr_check_row(disp, disp_r, y, max_diff):  # pragma: no cover - compiled
+    """Reject (set to -1) the left disparities of row ``y`` that the right image's disparity does not confirm within
+    ``max_diff``.
 
     Both integer neighbours of the sub-pixel disparity d are tried (floor and ceil, each compared with the right
     image's disparity at x minus itself); the pixel is kept when either agrees, so sub-pixel refinement does not
     count against the check.
     """
-    h, w = disp.shape
-    for y in range(h):
-        for x in range(w):
-            d = disp[y, x]
-            if d < 0:
-                continue
-            lo = int(d)
-            hi = lo + 1 if d > lo else lo
-            ok_lo = x - lo >= 0 and abs(lo - disp_r[y, x - lo]) <= max_diff
-            ok_hi = x - hi >= 0 and abs(hi - disp_r[y, x - hi]) <= max_diff
-            if not (ok_lo or ok_hi):
-                disp[y, x] = -1.0
+    w = disp.shape[1]
+    for x in range(w):
+        d = disp[y, x]
+        if d < 0:
+            continue
+        lo = int(d)
+        hi = lo + 1 if d > lo else lo
+        ok_lo = x - lo >= 0 and abs(lo - disp_r[y, x - lo]) <= max_diff
+        ok_hi = x - hi >= 0 and abs(hi - disp_r[y, x - hi]) <= max_diff
+        if not (ok_lo or ok_hi):
+            disp[y, x] = -1.0
 
 
 @njit(cache=True)
@@ -548,8 +552,8 @@ def disparity_sgm(
         raise ValueError(f"`speckle_range` must be >= 0, got {speckle_range}")
 
     gl, gr = _gray(left), _gray(right)
-    planes_l = np.ascontiguousarray(np.moveaxis(left.reshape(left.shape[0], left.shape[1], -1), 2, 0), np.int16)
-    planes_r = np.ascontiguousarray(np.moveaxis(right.reshape(right.shape[0], right.shape[1], -1), 2, 0), np.int16)
+    planes_l = np.ascontiguousarray(left).reshape(left.shape[0], left.shape[1], -1)  # (H, W, C) views, no copy
+    planes_r = np.ascontiguousarray(right).reshape(right.shape[0], right.shape[1], -1)
     ry, rx = census_size[0] // 2, census_size[1] // 2
     nch = 1 if left.ndim == 2 else 3
     # AD term = ad_weight * min(mean_c |dI_c|, ad_trunc) in 16.16 fixed point on the channel sum
@@ -569,18 +573,18 @@ def disparity_sgm(
     # 4 KiB pages, first-touch page faults on the tens of MB of volumes cost a sizeable share of the run time
     h, w = gl.shape
     cost = np.empty((h, w, int(max_disp)), np.uint8)
-    cen = _census(gl_pad, gr_pad, ry, rx)
-    _cost_volume(cen[0], cen[1], planes_l, planes_r, np.int32(ad_cap), np.int32(ad_mult), np.uint8(c_max), cost)
+    _cost_volume(gl_pad, gr_pad, ry, rx, planes_l, planes_r, np.int32(ad_cap), np.int32(ad_mult), np.uint8(c_max),
+                 cost)
     steps = np.arange(256, dtype=np.float64)
     p2_lut = np.full(256, p2, np.float64) if p2_tau == 0 else np.floor(p2 * p2_tau / (p2_tau + steps))
     p2_lut = np.maximum(p2_lut, p1 + 1).astype(np.int16)
     down = np.empty(cost.shape, np.uint16)
     up = np.empty(cost.shape, np.uint16)
     _aggregate(cost, gl, 3 if paths == 8 else 1, np.int16(p1), p2_lut, down, up)
-    disp, disp_r = _winner(cost, down, up, gl, np.int16(p1), p2_lut, float(uniqueness), bool(subpixel))
+    # the left-right check runs row by row inside _winner (a negative lr_max_diff disables it)
+    disp, _ = _winner(cost, down, up, gl, np.int16(p1), p2_lut, float(uniqueness), bool(subpixel),
+                      float(lr_max_diff))
     del cost, down, up
-    if lr_max_diff >= 0:
-        _lr_check(disp, disp_r, float(lr_max_diff))
     if speckle_size > 0:
         _remove_speckles(disp, int(speckle_size), float(speckle_range))
     if fill:
