@@ -326,9 +326,53 @@ def prefilter_counts(descriptors: Sequence[np.ndarray], ratio: float) -> np.ndar
     return C
 
 
+def refit(src: np.ndarray, dst: np.ndarray, H: np.ndarray, inliers: np.ndarray, threshold: float,
+          min_inliers: int, size_i: tuple[int, int], rng=None) -> tuple[np.ndarray, np.ndarray]:
+    """Fit a pair's homography again to its inliers with a tighter ``threshold`` (RANSAC + LM on that subset).
+
+    The first fit's threshold (3 px) lets matches with errors of up to 3 px pull on the least-squares estimate;
+    refitting on the inliers within ``threshold`` of a consensus model of those inliers estimates the pair from
+    its most precise matches. On the Adobe sets this lowered the geometric mean of the pairwise corner errors
+    against the ground truth by about 4-8 % (see BENCHMARKS.md).
+
+    Parameters
+    ----------
+    src, dst : (N, 2) float
+        All the pair's matches (pixels of image i and j).
+    H : (3, 3)
+        The first fit (i -> j).
+    inliers : (N,) bool
+        Its inliers.
+    threshold : float
+        Inlier threshold of the refit, pixels.
+    min_inliers : int
+        Fewest inliers the refit must keep; otherwise the first fit is returned.
+    size_i : (w, h)
+        Size of image i (the refit must stay plausible, :func:`_plausible`).
+    rng : seed or Generator
+
+    Returns
+    -------
+    H : (3, 3)
+        The refitted homography, or ``H`` when the refit fails or keeps too few inliers.
+    inliers : (N,) bool
+        Its inliers among all N matches.
+    """
+    idx = np.flatnonzero(inliers)
+    try:
+        fit = find_homography(src[idx], dst[idx], threshold=threshold, rng=rng)
+    except EstimationError:
+        return H, inliers
+    if int(fit.inliers.sum()) < min_inliers or _plausible(fit.H, size_i):
+        return H, inliers
+    keep = np.zeros(len(src), bool)
+    keep[idx[fit.inliers]] = True
+    return fit.H, keep
+
+
 def match_graph(feats: Sequence[Features], sizes: Sequence[tuple[int, int]], *, ratio: float,
                 ransac_threshold: float, min_inliers: int, min_confidence: float, candidates: int = 0,
-                rng=None) -> MatchGraph:
+                refit_threshold: float = 0.0, rng=None) -> MatchGraph:
     """Match every pair of images and keep the pairs that share a plausible homography.
 
     Parameters
@@ -347,6 +391,9 @@ def match_graph(feats: Sequence[Features], sizes: Sequence[tuple[int, int]], *, 
         Fewest ``inliers / (8 + 0.3 * matches)`` for an edge (1.0 in ``cv2.Stitcher``).
     candidates : int
         Match in full only each image's best candidates (:func:`candidate_pairs`); 0 matches every pair.
+    refit_threshold : float
+        When in (0, ``ransac_threshold``), an accepted pair's homography is fitted again to its inliers with this
+        tighter threshold (:func:`refit`); acceptance is still decided by the first fit. 0: no refit.
     rng : seed or Generator
         For RANSAC.
 
@@ -388,8 +435,11 @@ def match_graph(feats: Sequence[Features], sizes: Sequence[tuple[int, int]], *, 
             why = f"confidence {conf:.2f} < min_confidence {min_confidence}"
         if why:
             rejected[(i, j)] = why
-        else:
-            edges[(i, j)] = Edge(i, j, fit.H / fit.H[2, 2], src[fit.inliers], dst[fit.inliers], conf)
+            return
+        H, keep = fit.H, fit.inliers
+        if 0 < refit_threshold < ransac_threshold:
+            H, keep = refit(src, dst, fit.H, fit.inliers, refit_threshold, min_inliers, sizes[i], rng)
+        edges[(i, j)] = Edge(i, j, H / H[2, 2], src[keep], dst[keep], conf)
 
     # binary descriptors: one Hamming index per image, built once and queried by each of its partners; float
     # descriptors: exact brute force by a matrix product (faster than FLANN at these sizes)
@@ -1082,7 +1132,7 @@ def stitch(images: Sequence[np.ndarray], features: PanoramaFeaturesParams = Pano
     t0 = time.perf_counter()
     graph = match_graph(feats, work_sizes, ratio=matching.ratio, ransac_threshold=matching.ransac_threshold,
                         min_inliers=matching.min_inliers, min_confidence=matching.min_confidence,
-                        candidates=matching.candidates, rng=rng)
+                        candidates=matching.candidates, refit_threshold=matching.refit_threshold, rng=rng)
     t["match"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     reg = register(graph, refine=homographies.refine, max_points_per_pair=homographies.max_points_per_pair,

@@ -396,13 +396,15 @@ class PanoramaFeaturesParams:
 @dataclass(frozen=True)
 class PanoramaMatchParams:
     """``panorama.match``: pairwise matching and the acceptance of a pair as an edge of the match graph; only each
-    image's ``candidates`` most promising partners are matched in full (0: every pair)."""
+    image's ``candidates`` most promising partners are matched in full (0: every pair). An accepted pair's
+    homography is refitted on its inliers with the tighter ``refit_threshold`` (0: no refit)."""
 
     ratio: float = 0.8
     ransac_threshold: float = 3.0
     min_inliers: int = 10
     min_confidence: float = 1.0
     candidates: int = 5
+    refit_threshold: float = 2.0
     seed: int = 0
 
     def __post_init__(self):
@@ -411,6 +413,7 @@ class PanoramaMatchParams:
         _in_range("ransac_threshold", self.ransac_threshold, 0.0, None, lo_open=True)
         _in_range("min_inliers", self.min_inliers, 4, None)
         _in_range("min_confidence", self.min_confidence, 0.0, None)
+        _in_range("refit_threshold", self.refit_threshold, 0.0, self.ransac_threshold)
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ def main() -> None:
         t0 = time.perf_counter()
         graph = panorama.match_graph(feats, sizes, ratio=p.ratio, ransac_threshold=p.ransac_threshold,
                                      min_inliers=p.min_inliers, min_confidence=p.min_confidence,
-                                     candidates=p.candidates, rng=p.seed)
+                                     candidates=p.candidates, refit_threshold=p.refit_threshold, rng=p.seed)
         io.save_npz(Path(args.out) / f"{d.name}.npz", **graph.to_arrays(),
                     files=[str(a["image_file"]) for a in arrays], full_sizes=[a["full_size"] for a in arrays],
                     seconds=time.perf_counter() - t0)

@@ -284,6 +284,10 @@ def test_validation_errors(views):
         PanoramaMatchParams(candidates=-1)
     with pytest.raises(ValueError, match=r"`min_inliers` must be in \[4, inf\]"):
         PanoramaMatchParams(min_inliers=3)
+    with pytest.raises(ValueError, match=r"`refit_threshold` must be in \[0.0, 3.0\], got 4.0"):
+        PanoramaMatchParams(refit_threshold=4.0)
+    with pytest.raises(ValueError, match=r"`refit_threshold` must be in \[0.0, 3.0\], got -1.0"):
+        PanoramaMatchParams(refit_threshold=-1.0)
     with pytest.raises(ValueError, match=r"`max_points_per_pair` must be in \[4, inf\]"):
         PanoramaHomographiesParams(max_points_per_pair=2)
     with pytest.raises(ValueError, match=r"`max_canvas_megapix` must be in \(0.0, inf\]"):
@@ -483,7 +487,36 @@ def test_bench_accuracy_measures_direct_and_composed_errors():
     assert acc["gt_pairs"] == 3 and acc["direct_pairs"] == 2
     assert acc["direct_error_median_matched"] == pytest.approx(2.0)
     assert acc["direct_error_median"] == pytest.approx(4.0)
+    # direct, with the (exact) composed error standing in for the pair that is not an edge: errors 4, 0, 0
+    assert acc["direct_or_composed_median"] == pytest.approx(0.0, abs=1e-9)
     # a consistent ground truth has a floor of 0; breaking one pair's consistency raises it
     assert bench._gt_floor(gt, sizes) < 1e-3
     gt[(2, 0)] = shift @ gt[(2, 0)]
     assert bench._gt_floor(gt, sizes) > 0.1
+
+
+def test_refit_drops_imprecise_matches_and_recovers_the_homography():
+    rng = np.random.default_rng(3)
+    size = (640, 480)
+    H_true = np.array([[0.98, 0.03, 210.0], [-0.02, 1.01, 12.0], [2e-5, -1e-5, 1.0]])
+    # over the right half: 200 precise matches (0.2 px noise), 150 imprecise ones displaced by 2.2-2.8 px in random
+    # directions (inside the 3 px RANSAC threshold, so the first fit keeps them), and 100 gross outliers
+    src = rng.uniform([320, 0], [640, 480], (450, 2))
+    dst = warping.apply_h(H_true, src)
+    dst[:200] += rng.normal(0, 0.2, (200, 2))
+    angle = rng.uniform(0, 2 * np.pi, 150)
+    dst[200:350] += rng.uniform(2.2, 2.8, 150)[:, None] * np.column_stack([np.cos(angle), np.sin(angle)])
+    dst[350:] = rng.uniform([0, 0], [640, 480], (100, 2))
+    first = panorama.find_homography(src, dst, threshold=3.0, rng=0)
+    H, keep = panorama.refit(src, dst, first.H, first.inliers, 1.0, 10, size, rng=0)
+    # 1 px is 5 sigma of the precise matches' noise and well below the imprecise ones' 2.2 px
+    assert keep[:200].mean() > 0.95 and keep[200:350].mean() < 0.1 and not keep[350:].any()
+    assert not (keep & ~first.inliers).any()
+    # the first fit averages the imprecise matches in (0.9 px at the corners, which are extrapolated over the left
+    # half); the refit's final reweighting still gives them small weights (cvpipe.homography's weights reach 3x the
+    # threshold), so it lands between that and the 0.1 px of a fit to the precise matches alone: 0.43 px here
+    err_refit, err_first = _corner_error(H, H_true, size), _corner_error(first.H, H_true, size)
+    assert err_refit < 0.6 and err_refit < 0.75 * err_first
+    # too few inliers left for the refit: the first fit is returned unchanged
+    H2, keep2 = panorama.refit(src, dst, first.H, first.inliers, 1.0, 1000, size, rng=0)
+    assert H2 is first.H and keep2 is first.inliers
