@@ -123,7 +123,7 @@ def empty_descriptors(detector: str) -> np.ndarray:
 
 
 def detect(gray: np.ndarray, detector: str = "sift", max_features: int = 4000,
-           mask: np.ndarray | None = None) -> Features:
+           mask: np.ndarray | None = None, min_long_side: int = 0) -> Features:
     """Detect keypoints and compute descriptors.
 
     Parameters
@@ -136,6 +136,10 @@ def detect(gray: np.ndarray, detector: str = "sift", max_features: int = 4000,
         Keep at most this many keypoints, the strongest by response.
     mask : (H, W) uint8, optional
         Detect only where non-zero.
+    min_long_side : int
+        An image whose longer side is shorter than this is enlarged (bicubic) to that length before detection, so
+        that small structures (a logo a few dozen pixels wide) reach the detector's finest scale; positions and sizes
+        are reported in the original image's pixels. 0 (default) detects at the given size.
 
     Returns
     -------
@@ -150,6 +154,15 @@ def detect(gray: np.ndarray, detector: str = "sift", max_features: int = 4000,
         raise InputError("`gray` is empty (0 pixels)")
     if not isinstance(max_features, (int, np.integer)) or max_features <= 0:
         raise ValueError(f"`max_features` must be a positive integer, got {max_features!r}")
+    if not isinstance(min_long_side, (int, np.integer)) or min_long_side < 0:
+        raise ValueError(f"`min_long_side` must be a non-negative integer, got {min_long_side!r}")
+    scale = min_long_side / max(gray.shape) if max(gray.shape) < min_long_side else 1.0
+    if scale != 1.0:
+        size_up = (int(round(gray.shape[1] * scale)), int(round(gray.shape[0] * scale)))
+        sxy = np.array([size_up[0] / gray.shape[1], size_up[1] / gray.shape[0]], np.float64)
+        gray = cv2.resize(gray, size_up, interpolation=cv2.INTER_CUBIC)
+        if mask is not None:
+            mask = cv2.resize(np.asarray(mask, np.uint8), size_up, interpolation=cv2.INTER_NEAREST)
     factory, _ = DETECTORS[detector]
     keypoints, desc = factory(int(max_features)).detectAndCompute(gray, mask)
     if desc is None or not keypoints:
@@ -159,5 +172,8 @@ def detect(gray: np.ndarray, detector: str = "sift", max_features: int = 4000,
     order = np.argsort(-response, kind="stable")[:max_features]
     xy = np.array([k.pt for k in keypoints], np.float32)[order]
     size = np.array([k.size for k in keypoints], np.float32)[order]
+    if scale != 1.0:  # back to the original pixels (pixel centres: x = (x' + 0.5) / s - 0.5)
+        xy = ((xy + 0.5) / sxy - 0.5).astype(np.float32)
+        size = (size / np.sqrt(sxy.prod())).astype(np.float32)
     angle = np.array([k.angle for k in keypoints], np.float32)[order]
     return Features(xy, size, angle, response[order], np.ascontiguousarray(desc[order]), detector)

@@ -98,6 +98,13 @@ class Gallery:
         Keypoint index inside its reference of every stacked descriptor.
     brand_of_ref : (R,) int64
         Index into ``brands`` of every reference.
+    frame_of_ref : (R,) int64
+        Shared frame of every reference (see :func:`register_references`); every reference is its own frame when
+        the gallery was built without registration.
+    to_frame : (R, 3, 3) float64
+        Homography from each reference's pixels to the pixels of its frame's anchor reference.
+    anchors : (F,) int64
+        Anchor reference of every frame.
     """
 
     detector: str
@@ -108,6 +115,16 @@ class Gallery:
     local_of: np.ndarray
     brand_of_ref: np.ndarray
     matcher: cv2.DescriptorMatcher = field(repr=False)
+    frame_of_ref: np.ndarray | None = None
+    to_frame: np.ndarray | None = None
+    anchors: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.frame_of_ref is None:  # no registration: every reference is its own frame
+            n = len(self.references)
+            object.__setattr__(self, "frame_of_ref", np.arange(n, dtype=np.int64))
+            object.__setattr__(self, "to_frame", np.repeat(np.eye(3)[None], n, axis=0))
+            object.__setattr__(self, "anchors", np.arange(n, dtype=np.int64))
 
     @property
     def binary(self) -> bool:
@@ -171,6 +188,11 @@ class Hypothesis:
         Inlier ``[reference keypoint, scene keypoint]`` index pairs.
     reason : str
         Why the hypothesis was rejected, empty when it passed every check.
+    reference_xy : (K, 2) float64
+        The inliers' reference keypoints in the pixels of ``reference`` (the frame's anchor).
+    pair_refs : (K,) int64
+        Reference of each inlier pair (``pairs[:, 0]`` indexes that reference's keypoints); differs from
+        ``reference`` when the frame pools several registered references.
     """
 
     brand: str
@@ -182,6 +204,8 @@ class Hypothesis:
     quad: np.ndarray | None
     pairs: np.ndarray
     reason: str = ""
+    reference_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    pair_refs: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     @property
     def plausible(self) -> bool:
@@ -236,7 +260,8 @@ def _strongest(f: Features, n: int) -> Features:
 
 
 def build_gallery(references: Sequence[Reference], min_features: int = 8,
-                  max_features: int | None = None) -> Gallery:
+                  max_features: int | None = None, register: bool = False,
+                  links: dict[tuple[str, str], tuple[np.ndarray, int]] | None = None) -> Gallery:
     """Index the references of every brand once.
 
     Parameters
@@ -250,6 +275,12 @@ def build_gallery(references: Sequence[Reference], min_features: int = 8,
         Keep at most this many keypoints per reference, the strongest by detector response. The binary detectors
         find up to 4000 keypoints inside one boxed logo, and the brute-force Hamming search costs in proportion to
         the stacked total. Default: keep all.
+    register : bool
+        Map the references of each brand into shared frames (:func:`register_references`), so that verification
+        pools the matches of every reference of a frame into one model. Default: every reference on its own.
+    links : dict, optional
+        Precomputed :func:`reference_links` of (a superset of) these references, keyed by reference names; only
+        used with ``register``. Default: computed here.
 
     Raises
     ------
@@ -299,7 +330,134 @@ def build_gallery(references: Sequence[Reference], min_features: int = 8,
     matcher.add([desc])
     matcher.train()
     brand_of_ref = np.array([brands.index(r.brand) for r in usable], np.int64)
-    return Gallery(detector, brands, tuple(usable), dropped, ref_of, local_of, brand_of_ref, matcher)
+    if not register:
+        return Gallery(detector, brands, tuple(usable), dropped, ref_of, local_of, brand_of_ref, matcher)
+    if links is None:
+        links = reference_links(usable)
+    frame_of_ref, to_frame, anchors = register_references(usable, links)
+    return Gallery(detector, brands, tuple(usable), dropped, ref_of, local_of, brand_of_ref, matcher,
+                   frame_of_ref, to_frame, anchors)
+
+
+def reference_links(references: Sequence[Reference], ratio: float = 0.8, threshold: float = 3.0,
+                    min_inliers: int = 12, params: LogoVerifyParams | None = None,
+                    rng=0) -> dict[tuple[str, str], tuple[np.ndarray, int]]:
+    """Homographies between the references of each brand that show the same logo.
+
+    Every pair of references of one brand is matched (nearest neighbour with Lowe's ratio test) and fitted by
+    RANSAC; a link is kept when it has at least ``min_inliers`` inliers, its a-contrario score is positive, and
+    the first logo outline maps onto the second as a plausible view of the same flat logo (convex, not mirrored,
+    area 1/4 to 4 times the second outline's, anisotropy at most ``params.max_anisotropy``). Logo variants (a
+    wordmark and an emblem of one brand) do not link, and stay separate.
+
+    Parameters
+    ----------
+    references : sequence of Reference
+    ratio : float
+        Ratio-test threshold for reference-to-reference matches.
+    threshold : float
+        RANSAC threshold in pixels of the second reference.
+    min_inliers : int
+    params : LogoVerifyParams, optional
+        ``max_anisotropy`` and ``max_perspective`` for the plausibility check.
+    rng : None, int or Generator
+
+    Returns
+    -------
+    dict
+        ``(name_i, name_j) -> (H, inliers)`` with ``H`` mapping reference i's pixels to reference j's, for i
+        before j in ``references``.
+    """
+    p = params or LogoVerifyParams()
+    rng = np.random.default_rng(rng)
+    refs = list(references)
+    if not refs:
+        return {}
+    binary = DETECTORS[refs[0].features.detector][1]
+    matcher = cv2.BFMatcher(cv2.NORM_HAMMING if binary else cv2.NORM_L2)
+    desc = [_prepare(r.features.descriptors, binary) for r in refs]
+    link_params = LogoVerifyParams(**{**{f: getattr(p, f) for f in p.__dataclass_fields__},
+                                      "min_area": 0.25, "max_area": 4.0})
+    out: dict[tuple[str, str], tuple[np.ndarray, int]] = {}
+    for i, j in itertools.combinations(range(len(refs)), 2):
+        a, b = refs[i], refs[j]
+        if a.brand != b.brand or len(desc[i]) < min_inliers or len(desc[j]) < min_inliers:
+            continue
+        knn = matcher.knnMatch(desc[i], desc[j], k=2)
+        good = [m[0] for m in knn if len(m) == 2 and m[0].distance < ratio * m[1].distance]
+        if len(good) < min_inliers:
+            continue
+        src = a.features.xy[[m.queryIdx for m in good]].astype(np.float64)
+        dst = b.features.xy[[m.trainIdx for m in good]].astype(np.float64)
+        try:
+            fit = find_homography(src, dst, threshold=threshold, confidence=0.999, max_iters=2000, rng=rng)
+        except EstimationError:
+            continue
+        n_in = int(np.sum(fit.inliers))
+        if n_in < min_inliers:
+            continue
+        q = b.outline
+        box_size = (q[1, 0] - q[0, 0] + 1.0, q[2, 1] - q[1, 1] + 1.0)
+        if significance(n_in, len(good), threshold, box_size[0] * box_size[1], 1) <= 0:
+            continue
+        if shape_problem(fit.H, a.outline, box_size, link_params):
+            continue
+        out[(a.name, b.name)] = (np.asarray(fit.H, np.float64), n_in)
+    return out
+
+
+def register_references(references: Sequence[Reference], links: dict[tuple[str, str], tuple[np.ndarray, int]]
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Group linked references into frames and map each into its frame's anchor reference.
+
+    The references joined by :func:`reference_links` form connected groups; the anchor of a group is its member
+    with the most link inliers, and every other member is mapped into the anchor by composing the links along the
+    maximum spanning tree (most inliers first) grown from the anchor. Matches to any member of a group can then be
+    verified together as one model of the logo, which finds a logo that no single reference matches often enough.
+
+    Returns
+    -------
+    frame_of_ref : (R,) int64
+    to_frame : (R, 3, 3) float64
+        Reference pixels -> anchor pixels (identity for the anchors).
+    anchors : (F,) int64
+    """
+    refs = list(references)
+    n = len(refs)
+    index = {r.name: i for i, r in enumerate(refs)}
+    adj: dict[int, dict[int, tuple[np.ndarray, int]]] = {i: {} for i in range(n)}
+    for (na, nb), (H, n_in) in links.items():
+        if na in index and nb in index:
+            i, j = index[na], index[nb]
+            adj[i][j] = (H, n_in)  # i -> j
+            adj[j][i] = (np.linalg.inv(H), n_in)
+    frame_of_ref = np.full(n, -1, np.int64)
+    to_frame = np.repeat(np.eye(3)[None], n, axis=0)
+    anchors: list[int] = []
+    for start in range(n):
+        if frame_of_ref[start] >= 0:
+            continue
+        comp, stack = {start}, [start]
+        while stack:
+            for j in adj[stack.pop()]:
+                if j not in comp:
+                    comp.add(j)
+                    stack.append(j)
+        anchor = max(sorted(comp), key=lambda i: sum(v[1] for v in adj[i].values()))
+        f = len(anchors)
+        anchors.append(anchor)
+        frame_of_ref[anchor] = f
+        # Prim's algorithm on inlier counts: attach the strongest link from the tree each time
+        while True:
+            best = max(((adj[i][j][1], j, i) for i in comp if frame_of_ref[i] == f for j in adj[i]
+                        if frame_of_ref[j] < 0), default=None)
+            if best is None:
+                break
+            _, child, parent = best
+            frame_of_ref[child] = f
+            H = to_frame[parent] @ adj[child][parent][0]
+            to_frame[child] = H / H[2, 2]
+    return frame_of_ref, to_frame, np.array(anchors, np.int64)
 
 
 # ----------------------------------------------------------------------------------------------- matching
@@ -444,8 +602,55 @@ def fit_affine(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     return np.r_[M.T, [[0.0, 0.0, 1.0]]]
 
 
+def map_poses(H: np.ndarray, xy: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """Keypoint orientations and scales carried through the homography ``H``.
+
+    Parameters
+    ----------
+    H : (3, 3)
+    xy : (N, 2)
+        Keypoint positions before the mapping.
+    pose : (N, 2)
+        ``[angle in degrees, natural log of the keypoint size]`` (OpenCV's angle: image axes, y down).
+
+    Returns
+    -------
+    (N, 2) poses after the mapping: the direction vector of each angle is mapped by the local Jacobian of ``H``,
+    and the log size grows by the log of the Jacobian's area scale, halved (a length scale).
+    """
+    H = np.asarray(H, np.float64)
+    xy = np.asarray(xy, np.float64)
+    w = xy @ H[2, :2] + H[2, 2]
+    hx = xy @ H[:2, :2].T + H[:2, 2]
+    J = (H[None, :2, :2] * w[:, None, None] - hx[:, :, None] * H[None, 2:3, :2]) / (w * w)[:, None, None]
+    return _apply_jacobians(J, pose)
+
+
+def _apply_jacobians(J: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """Poses mapped by local linear maps ``J`` (..., 2, 2) that broadcast against ``pose`` (N, 2)."""
+    a = np.deg2rad(pose[:, 0])
+    ux = J[..., 0, 0] * np.cos(a) + J[..., 0, 1] * np.sin(a)
+    uy = J[..., 1, 0] * np.cos(a) + J[..., 1, 1] * np.sin(a)
+    det = np.abs(J[..., 0, 0] * J[..., 1, 1] - J[..., 0, 1] * J[..., 1, 0])
+    return np.stack([np.rad2deg(np.arctan2(uy, ux)), pose[:, 1] + 0.5 * np.log(np.maximum(det, 1e-300))], axis=-1)
+
+
+def pose_agrees(predicted: np.ndarray, observed: np.ndarray, angle_tolerance: float,
+                scale_tolerance: float) -> np.ndarray:
+    """Whether predicted and observed ``[angle deg, log size]`` agree within the tolerances (degrees, ratio)."""
+    d = np.abs((predicted[..., 0] - observed[..., 0] + 180.0) % 360.0 - 180.0)
+    return (d <= angle_tolerance) & (np.abs(predicted[..., 1] - observed[..., 1]) <= np.log(scale_tolerance))
+
+
+def pose_probability(angle_tolerance: float, scale_tolerance: float) -> float:
+    """Chance that an unrelated match agrees in pose: orientation uniform over 360 degrees, log size ratio uniform
+    over a factor of 4 either way (``ln 16``); 1 when the tolerances switch the check off."""
+    return min(1.0, angle_tolerance / 180.0) * min(1.0, 2.0 * np.log(scale_tolerance) / np.log(16.0))
+
+
 def affine_ransac(src: np.ndarray, dst: np.ndarray, threshold: float, hypotheses: int = 500,
-                  rng=None) -> tuple[np.ndarray, np.ndarray]:
+                  rng=None, src_pose: np.ndarray | None = None, dst_pose: np.ndarray | None = None,
+                  angle_tolerance: float = 180.0, scale_tolerance: float = 1e9) -> tuple[np.ndarray, np.ndarray]:
     """Robust affine map from putative correspondences: RANSAC over 3-point samples, evaluated all at once.
 
     A logo that covers a small part of the scene is seen almost affinely, and an affine map cannot fold the
@@ -461,6 +666,9 @@ def affine_ransac(src: np.ndarray, dst: np.ndarray, threshold: float, hypotheses
     hypotheses : int
         3-point samples drawn (all triples when there are fewer).
     rng : None, int or Generator
+    src_pose, dst_pose : (N, 2) float, optional
+        ``[angle deg, log size]`` of the keypoints; when given, an inlier must also agree in orientation and scale
+        with the model's prediction within ``angle_tolerance`` degrees and a ``scale_tolerance`` size ratio.
 
     Returns
     -------
@@ -500,6 +708,9 @@ def affine_ransac(src: np.ndarray, dst: np.ndarray, threshold: float, hypotheses
     err2 = ex * ex + ey * ey
     th2 = threshold * threshold
     inl = err2 < th2
+    use_pose = src_pose is not None and dst_pose is not None
+    if use_pose:
+        inl &= pose_agrees(_apply_jacobians(L[:, None], src_pose), dst_pose[None], angle_tolerance, scale_tolerance)
     # most inliers; among equals the smallest truncated squared error (MSAC)
     best = int(np.argmax(inl.sum(axis=1) - np.minimum(err2, th2).sum(axis=1) / (th2 * n + 1.0)))
     inliers = inl[best]
@@ -509,6 +720,9 @@ def affine_ransac(src: np.ndarray, dst: np.ndarray, threshold: float, hypotheses
             break
         A2 = fit_affine(src[inliers], dst[inliers])
         in2 = np.linalg.norm(src @ A2[:2, :2].T + A2[:2, 2] - dst, axis=1) < threshold
+        if use_pose:
+            in2 &= pose_agrees(_apply_jacobians(A2[None, :2, :2], src_pose), dst_pose, angle_tolerance,
+                               scale_tolerance)
         if in2.sum() < inliers.sum():
             break
         A, same, inliers = A2, np.array_equal(in2, inliers), in2
@@ -517,7 +731,8 @@ def affine_ransac(src: np.ndarray, dst: np.ndarray, threshold: float, hypotheses
     return A, inliers
 
 
-def significance(inliers: int, matches: int, threshold: float, area: float, n_refs: int) -> float:
+def significance(inliers: int, matches: int, threshold: float, area: float, n_refs: int,
+                 pose_prob: float = 1.0) -> float:
     """``-log10`` of the number of false alarms of a homography with ``inliers`` among ``matches``.
 
     Parameters
@@ -530,62 +745,86 @@ def significance(inliers: int, matches: int, threshold: float, area: float, n_re
         Scene area (px^2) over which chance matches spread.
     n_refs : int
         Number of references tested in this scene (multiple tests).
+    pose_prob : float
+        Chance that an unrelated match also agrees with the model in orientation and scale
+        (:func:`pose_probability`; 1 when inliers are judged by position only). The 4 matches of the minimal sample
+        fix the model's position but not the orientations and scales of their keypoints, so they count too.
     """
-    if matches < 5 or inliers < 5:
+    if matches < 5 or inliers < (5 if pose_prob >= 1.0 else 4):
         return -np.inf
-    prob = min(1.0, np.pi * threshold ** 2 / max(area, 1.0))
+    prob = min(1.0, np.pi * threshold ** 2 / max(area, 1.0)) * pose_prob
     n, k = matches - 4, inliers - 4
-    log_tail = binom.logsf(k - 1, n, prob)  # ln P(X >= k)
+    log_tail = binom.logsf(k - 1, n, prob) if k > 0 else 0.0  # ln P(X >= k)
     if not np.isfinite(log_tail):  # the tail underflows for huge inlier counts; its first term bounds it from below
         log_tail = binom.logpmf(k, n, prob)
     log_tail /= np.log(10)
     log_hyp = (gammaln(matches + 1) - gammaln(5) - gammaln(matches - 3)) / np.log(10)  # log10 C(matches, 4)
-    return float(-(log_tail + log_hyp + np.log10(max(n_refs, 1))))
+    return float(-(log_tail + 4 * np.log10(pose_prob) + log_hyp + np.log10(max(n_refs, 1))))
 
 
 def _check(brand: str, r: int, ref: Reference, H: np.ndarray, inl: np.ndarray, src: np.ndarray, dst: np.ndarray,
-           g_idx: np.ndarray, s_idx: np.ndarray, scene_size: tuple[int, int], n_tested: int,
-           p: LogoVerifyParams) -> Hypothesis:
-    """Plausibility checks and score of one fitted model (see :func:`verify`)."""
-    n_in = int(inl.sum())
-    pairs = np.c_[g_idx[inl], s_idx[inl]]
+           g_idx: np.ndarray, s_idx: np.ndarray, m_ref: np.ndarray, scene_size: tuple[int, int], n_tested: int,
+           p: LogoVerifyParams, pose_prob: float = 1.0) -> Hypothesis:
+    """Plausibility checks and score of one fitted model (see :func:`verify`); ``src`` in the anchor's pixels."""
+    # one inlier per scene keypoint: the matches of one scene keypoint to several references of a frame agree
+    _, first = np.unique(np.where(inl, s_idx, -1), return_index=True)
+    keep = np.zeros(len(inl), bool)
+    keep[first] = True
+    keep &= inl
+    n_in = int(keep.sum())
+    n_matches = len(np.unique(s_idx))
+    pairs = np.c_[g_idx[keep], s_idx[keep]]
     reason = shape_problem(H, ref.outline, scene_size, p)
     quad = None if reason.startswith("outline crosses") else project(H, ref.outline)
     if not reason and n_in < p.min_inliers:
         reason = f"{n_in} inliers < {p.min_inliers}"
     if not reason:
-        spread = _hull_area(src[inl]) / ref.area
+        spread = _hull_area(src[keep]) / ref.area
         if spread < p.min_spread:
             reason = f"inliers cover {spread:.3f} of the reference < {p.min_spread}"
     score = -np.inf
     if not reason:
         area = float(scene_size[0] * scene_size[1])
-        score = significance(n_in, len(src), p.ransac_threshold, area, n_tested)
-    return Hypothesis(brand, r, len(src), n_in, score, H, quad, pairs, reason)
+        score = significance(n_in, n_matches, p.ransac_threshold, area, n_tested, pose_prob)
+    return Hypothesis(brand, r, n_matches, n_in, score, H, quad, pairs, reason, src[keep], m_ref[keep])
 
 
-
-def _reprojection_inliers(H: np.ndarray, src: np.ndarray, dst: np.ndarray, threshold: float) -> np.ndarray:
-    """(N,) bool: ``src`` mapped by ``H`` lands within ``threshold`` pixels of ``dst`` (in front of the camera)."""
+def _reprojection_inliers(H: np.ndarray, src: np.ndarray, dst: np.ndarray, threshold: float,
+                          poses: tuple | None = None, p: LogoVerifyParams | None = None) -> np.ndarray:
+    """(N,) bool: ``src`` mapped by ``H`` lands within ``threshold`` pixels of ``dst`` (in front of the camera), and
+    agrees in orientation and scale when ``poses = (src_pose, dst_pose)`` is given."""
     q = np.c_[src, np.ones(len(src))] @ H.T
     ok = q[:, 2] > 1e-9
     err = np.full(len(src), np.inf)
     err[ok] = np.linalg.norm(q[ok, :2] / q[ok, 2:3] - dst[ok], axis=1)
-    return err < threshold
+    inl = err < threshold
+    if poses is not None and inl.any():
+        agree = np.zeros(len(src), bool)
+        agree[inl] = pose_agrees(map_poses(H, src[inl], poses[0][inl]), poses[1][inl], p.angle_tolerance,
+                                 p.scale_tolerance)
+        inl &= agree
+    return inl
 
 
 def _fit_homography(src: np.ndarray, dst: np.ndarray, ref: Reference, scene_size: tuple[int, int],
-                    p: LogoVerifyParams, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+                    p: LogoVerifyParams, rng: np.random.Generator,
+                    poses: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
     fit = find_homography(src, dst, threshold=p.ransac_threshold, confidence=0.999, max_iters=p.max_iters, rng=rng)
-    return fit.H, np.asarray(fit.inliers, bool)
+    inl = np.asarray(fit.inliers, bool)
+    if poses is not None:
+        inl = _reprojection_inliers(fit.H, src, dst, p.ransac_threshold, poses, p)
+    return fit.H, inl
 
 
 def _fit_affine_homography(src: np.ndarray, dst: np.ndarray, ref: Reference, scene_size: tuple[int, int],
-                           p: LogoVerifyParams, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+                           p: LogoVerifyParams, rng: np.random.Generator,
+                           poses: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
     # the affine RANSAC picks the consistent matches; a homography refitted on them replaces the affine map when it
     # is plausible and explains about as many of all the matches (within 10 %: the affine inlier band of a
     # perspective view is not the homography's, and a few matches near the band edge may swap sides)
-    A, inl = affine_ransac(src, dst, p.ransac_threshold, p.affine_samples, rng)
+    sp, dp = poses if poses is not None else (None, None)
+    A, inl = affine_ransac(src, dst, p.ransac_threshold, p.affine_samples, rng, sp, dp, p.angle_tolerance,
+                           p.scale_tolerance)
     if inl.sum() < 5:
         return A, inl
     try:
@@ -593,32 +832,37 @@ def _fit_affine_homography(src: np.ndarray, dst: np.ndarray, ref: Reference, sce
                               max_iters=p.max_iters, rng=rng)
     except EstimationError:
         return A, inl
-    h_inl = _reprojection_inliers(fit.H, src, dst, p.ransac_threshold)
+    h_inl = _reprojection_inliers(fit.H, src, dst, p.ransac_threshold, poses, p)
     if h_inl.sum() >= max(0.9 * inl.sum(), 5) and not shape_problem(fit.H, ref.outline, scene_size, p):
         return fit.H, h_inl
     return A, inl
 
 
-#: ``logo.verify.model`` -> fitter(src, dst, reference, scene_size, params, rng) -> (H (3, 3), inliers (N,) bool)
+#: ``logo.verify.model`` -> fitter(src, dst, reference, scene_size, params, rng, poses) -> (H (3, 3), inliers (N,) bool)
 MODELS = {"homography": _fit_homography, "affine_homography": _fit_affine_homography}
 
 
-def verify(gallery: Gallery, matches: Matches, scene_xy: np.ndarray, scene_size: tuple[int, int],
+def verify(gallery: Gallery, matches: Matches, scene: Features | np.ndarray, scene_size: tuple[int, int],
            params: LogoVerifyParams | None = None, rng=None) -> list[Hypothesis]:
-    """Fit and check one homography per reference that has at least ``min_matches`` tentative matches.
+    """Fit and check one model per gallery frame (a reference, or a group of registered references, see
+    :func:`register_references`) that has at least ``min_matches`` tentatively matched scene keypoints.
 
     The fitter is ``params.model`` for float descriptors (SIFT) and ``params.binary_model`` for the binary ones (see
     :data:`MODELS`): binary detectors put their keypoints in dense clusters on texture, where 3-point affine samples
-    find chance fits more easily than 4-point homographies. When the best RANSAC fit fails the checks, its inliers are set aside and the remaining matches are fitted
-    again (at most ``max_models`` fits per reference); the number of fits enters the score's multiple-test count.
+    find chance fits more easily than 4-point homographies. An inlier must land within ``ransac_threshold`` of its
+    predicted position and, when the scene's keypoint orientations and sizes are given, agree with the model's
+    predicted orientation (``angle_tolerance``) and scale (``scale_tolerance``); the score then counts that
+    agreement as evidence (:func:`significance`). When the best RANSAC fit fails the checks, its inliers are set
+    aside and the remaining matches are fitted again (at most ``max_models`` fits per frame); the number of fits
+    enters the score's multiple-test count.
 
     Parameters
     ----------
     gallery : Gallery
     matches : Matches
         From :func:`match_scene`.
-    scene_xy : (N, 2) float
-        Scene keypoint positions, pixels.
+    scene : Features or (N, 2) float
+        Scene keypoints; with bare positions (pixels) inliers are judged by position only.
     scene_size : (width, height)
         Scene size in pixels.
     params : LogoVerifyParams, optional
@@ -628,21 +872,37 @@ def verify(gallery: Gallery, matches: Matches, scene_xy: np.ndarray, scene_size:
     Returns
     -------
     list of Hypothesis
-        One per tested reference, sorted by score (best first).
+        One per tested frame, sorted by score (best first); ``Hypothesis.reference`` is the frame's anchor.
     """
     p = params or LogoVerifyParams()
     rng = np.random.default_rng(rng)
-    scene_xy = np.asarray(scene_xy, np.float64)
-    refs = np.unique(matches.ref)
-    counts = {int(r): int(np.sum(matches.ref == r)) for r in refs}
-    tested = [r for r in refs if counts[int(r)] >= p.min_matches]
+    use_pose = isinstance(scene, Features) and (p.angle_tolerance < 180.0 or p.scale_tolerance < 16.0)
+    scene_xy = np.asarray(scene.xy if isinstance(scene, Features) else scene, np.float64)
+    scene_pose = (np.c_[scene.angle, np.log(np.maximum(scene.size, 1e-6))].astype(np.float64) if use_pose
+                  else None)
+    pose_prob = pose_probability(p.angle_tolerance, p.scale_tolerance) if use_pose else 1.0
+    frame = gallery.frame_of_ref[matches.ref]
+    frames = np.unique(frame)
+    # a scene keypoint matched to several references of one frame counts once
+    counts = {int(f): len(np.unique(matches.scene_idx[frame == f])) for f in frames}
+    tested = [f for f in frames if counts[int(f)] >= p.min_matches]
     fitter = MODELS[p.binary_model if gallery.binary else p.model]
     out = []
-    for r in tested:
-        ref = gallery.references[int(r)]
-        sel = matches.ref == r
-        g_idx, s_idx = matches.gallery_idx[sel], matches.scene_idx[sel]
-        src, dst = ref.features.xy[g_idx].astype(np.float64), scene_xy[s_idx]
+    for f in tested:
+        r = int(gallery.anchors[f])
+        ref = gallery.references[r]
+        sel = frame == f
+        g_idx, s_idx, m_ref = matches.gallery_idx[sel], matches.scene_idx[sel], matches.ref[sel]
+        src, src_pose = np.empty((len(g_idx), 2)), np.empty((len(g_idx), 2))
+        for k in np.unique(m_ref):  # every reference's keypoints in the anchor's pixels
+            at, kf = m_ref == k, gallery.references[int(k)].features
+            xy = kf.xy[g_idx[at]].astype(np.float64)
+            src[at] = project(gallery.to_frame[k], xy)
+            if use_pose:
+                pose = np.c_[kf.angle[g_idx[at]], np.log(np.maximum(kf.size[g_idx[at]], 1e-6))].astype(np.float64)
+                src_pose[at] = map_poses(gallery.to_frame[k], xy, pose)
+        dst = scene_xy[s_idx]
+        dst_pose = scene_pose[s_idx] if use_pose else None
         brand = ref.brand
         none = np.zeros((0, 2), np.int64)
         hyp, left = None, np.ones(len(src), bool)
@@ -652,15 +912,17 @@ def verify(gallery: Gallery, matches: Matches, scene_xy: np.ndarray, scene_size:
             if left.sum() < p.min_matches:
                 break
             try:
-                H, fit_inl = fitter(src[left], dst[left], ref, scene_size, p, rng)
+                H, fit_inl = fitter(src[left], dst[left], ref, scene_size, p, rng,
+                                    (src_pose[left], dst_pose[left]) if use_pose else None)
             except EstimationError as exc:
                 if hyp is None:
-                    hyp = Hypothesis(brand, int(r), len(src), 0, -np.inf, None, None, none, f"no homography: {exc}")
+                    hyp = Hypothesis(brand, r, counts[int(f)], 0, -np.inf, None, None, none, f"no homography: {exc}",
+                                     np.zeros((0, 2)))
                 break
             inl = np.zeros(len(src), bool)
             inl[np.flatnonzero(left)[fit_inl]] = True
-            cand = _check(brand, int(r), ref, H, inl, src, dst, g_idx, s_idx, scene_size,
-                          len(tested) * attempt, p)
+            cand = _check(brand, r, ref, H, inl, src, dst, g_idx, s_idx, m_ref, scene_size,
+                          len(tested) * attempt, p, pose_prob)
             if hyp is None or (hyp.reason and not cand.reason):
                 hyp = cand
             if not cand.reason:
@@ -699,7 +961,7 @@ def recognize(gallery: Gallery, scene: Features, scene_size: tuple[int, int],
     if len(scene_size) != 2 or min(scene_size) < 1:
         raise ValueError(f"`scene_size` must be (width, height) >= 1, got {scene_size}")
     m = match_scene(gallery, scene, match_params)
-    return decide(verify(gallery, m, scene.xy, scene_size, verify_params, rng), verify_params)
+    return decide(verify(gallery, m, scene, scene_size, verify_params, rng), verify_params)
 
 
 # ------------------------------------------------------------------------------------------------- evaluation

@@ -473,6 +473,18 @@ SECTIONS.update({
 
 
 @dataclass(frozen=True)
+class LogoFeaturesParams(FeaturesParams):
+    """``logo.features``: keypoints of gallery and scene photos. ``min_long_side`` enlarges smaller photos before
+    detection (:func:`cvpipe.features.detect`), so that logos a few dozen pixels wide still get keypoints."""
+
+    min_long_side: int = 800
+
+    def __post_init__(self):
+        super().__post_init__()
+        _in_range("min_long_side", self.min_long_side, 0, 10_000)
+
+
+@dataclass(frozen=True)
 class LogoMatchParams:
     """``logo.match``: scene -> gallery matching (see :func:`cvpipe.logos.match_scene`)."""
 
@@ -481,6 +493,7 @@ class LogoMatchParams:
     per_reference: int = 1
     min_features: int = 8
     reference_features: int = 1000
+    register_references: bool = False
 
     def __post_init__(self):
         _in_range("ratio", self.ratio, 0.0, 1.0, lo_open=True)
@@ -488,6 +501,8 @@ class LogoMatchParams:
         _in_range("per_reference", self.per_reference, 1, self.k)
         _in_range("min_features", self.min_features, 4, 100_000)
         _in_range("reference_features", self.reference_features, self.min_features, 1_000_000)
+        if not isinstance(self.register_references, bool):
+            raise ValueError(f"`register_references` must be true or false, got {self.register_references!r}")
 
 
 @dataclass(frozen=True)
@@ -511,6 +526,8 @@ class LogoVerifyParams:
     max_perspective: float = 30.0
     min_spread: float = 0.05
     score_threshold: float = 0.0
+    angle_tolerance: float = 30.0
+    scale_tolerance: float = 2.0
 
     def __post_init__(self):
         models = ("affine_homography", "homography")
@@ -528,10 +545,12 @@ class LogoVerifyParams:
         _in_range("max_anisotropy", self.max_anisotropy, 1.0, 1000.0)
         _in_range("max_perspective", self.max_perspective, 1.0, 1e6)
         _in_range("min_spread", self.min_spread, 0.0, 1.0)
+        _in_range("angle_tolerance", self.angle_tolerance, 0.0, 180.0, lo_open=True)
+        _in_range("scale_tolerance", self.scale_tolerance, 1.0, 16.0, lo_open=True)
 
 
 SECTIONS.update({
-    "logo.features": FeaturesParams,
+    "logo.features": LogoFeaturesParams,
     "logo.match": LogoMatchParams,
     "logo.verify": LogoVerifyParams,
 })

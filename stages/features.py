@@ -4,7 +4,7 @@ import argparse
 from pathlib import Path
 
 from cvpipe import features, io
-from cvpipe.params import FeaturesParams, load_section
+from cvpipe.params import FeaturesParams, SECTIONS, load_section
 
 
 def main() -> None:
@@ -15,7 +15,7 @@ def main() -> None:
     ap.add_argument("--detector", help="override the section's detector (for matrix stages)")
     ap.add_argument("--params", default="params.yaml")
     args = ap.parse_args()
-    p = load_section(FeaturesParams, args.section, args.params)
+    p = load_section(SECTIONS.get(args.section, FeaturesParams), args.section, args.params)
     detector = args.detector or p.detector
     root, out = Path(args.images), Path(args.out)
     files = sorted(f for f in root.rglob("*") if f.suffix.lower() in io.IMAGE_SUFFIXES)
@@ -23,7 +23,7 @@ def main() -> None:
         raise SystemExit(f"cvpipe: error: {root}: no images found")
     for f in io.progress(files, f"features {detector}"):
         gray = io.read_image(f, "gray")
-        feats = features.detect(gray, detector, p.max_features)
+        feats = features.detect(gray, detector, p.max_features, min_long_side=getattr(p, "min_long_side", 0))
         rel = f.relative_to(root).with_suffix(".npz")
         io.save_npz(out / rel, **feats.to_arrays(), image_size=gray.shape[::-1])
 

@@ -11,7 +11,7 @@ from cvpipe.features import Features
 from cvpipe.params import LogoMatchParams, load_section
 
 
-def load_gallery_features(folder: Path, min_features: int, reference_features: int | None = None) -> logos.Gallery:
+def load_gallery_features(folder: Path, params: LogoMatchParams) -> logos.Gallery:
     """Gallery from cached feature files laid out like the images: <brand>.npz or <brand>/*.npz."""
     refs = []
     for f in sorted(folder.rglob("*.npz")):
@@ -19,7 +19,7 @@ def load_gallery_features(folder: Path, min_features: int, reference_features: i
         arrays = io.load_npz(f)
         w, h = (int(v) for v in arrays["image_size"])
         refs.append(logos.Reference(brand, str(f), Features.from_arrays(arrays), (w, h)))
-    return logos.build_gallery(refs, min_features, reference_features)
+    return logos.build_gallery(refs, params.min_features, params.reference_features, params.register_references)
 
 
 def main() -> None:
@@ -30,7 +30,7 @@ def main() -> None:
     ap.add_argument("--params", default="params.yaml")
     args = ap.parse_args()
     p = load_section(LogoMatchParams, "logo.match", args.params)
-    gallery = load_gallery_features(Path(args.gallery), p.min_features, p.reference_features)
+    gallery = load_gallery_features(Path(args.gallery), p)
     out, times = Path(args.out), {}
     for f in tqdm(sorted(Path(args.scenes).glob("*.npz")), desc=f"match {gallery.detector}", disable=None):
         scene = Features.from_arrays(io.load_npz(f))

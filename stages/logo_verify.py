@@ -25,7 +25,7 @@ def main() -> None:
     args = ap.parse_args()
     mp = load_section(LogoMatchParams, "logo.match", args.params)
     vp = load_section(LogoVerifyParams, "logo.verify", args.params)
-    gallery = load_gallery_features(Path(args.gallery), mp.min_features, mp.reference_features)
+    gallery = load_gallery_features(Path(args.gallery), mp)
     match_s = io.load_json(Path(args.matches) / "timings.json")["match_s"]
     truth = {s["file"]: s for s in io.load_json(args.truth)["scenes"]}
     out, records = Path(args.out), []
@@ -35,7 +35,7 @@ def main() -> None:
         scene, size = Features.from_arrays(arrays), tuple(int(v) for v in arrays["image_size"])
         t0 = time.perf_counter()
         hyps = logos.verify(gallery, logos.Matches.from_arrays(io.load_npz(Path(args.matches) / f"{stem}.npz")),
-                            scene.xy, size, vp, rng=0)
+                            scene, size, vp, rng=0)
         det = logos.decide(hyps, vp)
         elapsed = time.perf_counter() - t0 + match_s[stem]
         best = det.best
@@ -50,7 +50,7 @@ def main() -> None:
         records.append(rec)
         if best is not None:
             io.save_npz(out / f"{stem}.npz", pairs=best.pairs, H=best.H,
-                        gallery_xy=gallery.references[best.reference].features.xy[best.pairs[:, 0]],
+                        gallery_xy=best.reference_xy,
                         scene_xy=scene.xy[best.pairs[:, 1]])
     ev = logos.evaluate([r["truth"] for r in records], [r["best_brand"] for r in records],
                         [r["score"] if r["score"] is not None else -math.inf for r in records], vp.score_threshold)

@@ -110,3 +110,26 @@ def test_match_index_validation_and_edge_cases():
     # fewer than 32 train descriptors: brute force, still every point finds itself
     idx = matching.MatchIndex(a[:10]).query(a[:10], ratio=1.0)
     assert np.array_equal(np.sort(idx[:, 0]), np.arange(10)) and np.all(idx[:, 0] == idx[:, 1])
+
+
+def test_min_long_side_reports_original_pixels(textured_image):
+    """Detecting on a photo enlarged by ``min_long_side`` gives exactly the keypoints of the enlarged photo, moved
+    back into the original pixels (centre convention x = (x' + 0.5) / s - 0.5, sizes divided by s)."""
+    gray = cv2.cvtColor(textured_image, cv2.COLOR_BGR2GRAY) if textured_image.ndim == 3 else textured_image
+    small = cv2.resize(gray, (gray.shape[1] // 2, gray.shape[0] // 2), interpolation=cv2.INTER_AREA)
+    long_side = 2 * max(small.shape)
+    f = features.detect(small, "sift", 2000, min_long_side=long_side)
+    big = cv2.resize(small, (2 * small.shape[1], 2 * small.shape[0]), interpolation=cv2.INTER_CUBIC)
+    g = features.detect(big, "sift", 2000)
+    assert len(f) == len(g) > 100
+    np.testing.assert_allclose(f.xy, (g.xy + 0.5) / 2 - 0.5, atol=1e-4)
+    np.testing.assert_allclose(f.size, g.size / 2, rtol=1e-5)
+    assert f.xy.min() >= -0.5 and (f.xy.max(axis=0) <= np.array(small.shape[::-1]) - 0.5).all()
+    # an image already that long is left alone
+    same = features.detect(small, "sift", 2000, min_long_side=max(small.shape))
+    np.testing.assert_array_equal(same.xy, features.detect(small, "sift", 2000).xy)
+
+
+def test_min_long_side_validated(textured_image):
+    with pytest.raises(ValueError, match="`min_long_side` must be"):
+        features.detect(np.zeros((20, 20), np.uint8), "sift", 100, min_long_side=-1)

@@ -335,6 +335,9 @@ def test_draw_confusion_shape():
     (LogoVerifyParams, {"max_anisotropy": 0.5}, "`max_anisotropy` must be in"),
     (LogoVerifyParams, {"max_perspective": 0.5}, "`max_perspective` must be in"),
     (LogoVerifyParams, {"min_spread": 1.5}, "`min_spread` must be in"),
+    (LogoVerifyParams, {"angle_tolerance": 0.0}, "`angle_tolerance` must be in"),
+    (LogoVerifyParams, {"scale_tolerance": 1.0}, "`scale_tolerance` must be in"),
+    (LogoMatchParams, {"register_references": "yes"}, "`register_references` must be true or false"),
 ])
 def test_params_validation(cls, kwargs, match):
     with pytest.raises(ValueError, match=match):
@@ -442,7 +445,7 @@ def test_leave_one_out_protocol(tmp_path, marks):
     """Each boxed training photo is a scene twice: its brand must be found with the other photos of the brand in the
     gallery, and none when its brand is left out of the gallery entirely."""
     from cvpipe.bench.logo import run_leave_one_out
-    from cvpipe.params import FeaturesParams
+    from cvpipe.params import LogoFeaturesParams
 
     (tmp_path / "scenes").mkdir()
     (tmp_path / "gallery").mkdir()
@@ -458,7 +461,7 @@ def test_leave_one_out_protocol(tmp_path, marks):
         rows.append(f"scenes/{i}.jpg,{brand},bbox,{x1},{y1},{x2},{y2},640,480")
     (tmp_path / "scenes.csv").write_text("\n".join(rows) + "\n")
     cv2.imwrite(str(tmp_path / "gallery" / "brand1.png"), marks["brand1"])
-    res = run_leave_one_out(tmp_path, ["sift"], FeaturesParams(), LogoMatchParams(), LogoVerifyParams())
+    res = run_leave_one_out(tmp_path, ["sift"], LogoFeaturesParams(), LogoMatchParams(), LogoVerifyParams())
     ev = res["methods"]["sift"]
     assert res["protocol"]["photos"] == 5 and ev["scenes"] == 10 and ev["positives"] == 5
     detail = ev["scenes_detail"]
@@ -487,3 +490,126 @@ def test_fitter_follows_descriptor_kind(gallery, marks, monkeypatch):
             for b, m in marks.items()]
     det = logos.recognize(logos.build_gallery(refs), detect(gray, "orb"), (640, 480), verify_params=vp, rng=0)
     assert det.brand == "brand1" and set(used) == {"homography"}
+
+
+# ------------------------------------------------------------------- registered references and keypoint poses
+
+
+def _warped_reference(mark: np.ndarray, H: np.ndarray, name: str, brand: str = "brand0") -> logos.Reference:
+    """``mark`` warped by ``H`` onto a 260 x 260 white card (a second photo of the same logo)."""
+    card = cv2.warpPerspective(mark, H, (260, 260), borderValue=(255, 255, 255))
+    return logos.Reference(brand, name, detect(cv2.cvtColor(card, cv2.COLOR_BGR2GRAY), "sift"), (260, 260))
+
+
+def test_reference_links_recover_the_view_between_references(marks):
+    """Two views of brand0 related by a known homography link with that homography; other brands never link."""
+    H = _view((130, 130), 0.9, 25, PERSP)
+    a = logos.Reference("brand0", "a", detect(cv2.cvtColor(marks["brand0"], cv2.COLOR_BGR2GRAY), "sift"), (200, 200))
+    b = _warped_reference(marks["brand0"], H, "b")
+    c = logos.Reference("brand1", "c", detect(cv2.cvtColor(marks["brand1"], cv2.COLOR_BGR2GRAY), "sift"), (200, 200))
+    links = logos.reference_links([a, b, c])
+    assert set(links) == {("a", "b")}
+    H_ab, n_in = links[("a", "b")]
+    assert n_in >= 12
+    corners = logos.outline((200, 200))
+    # SIFT keypoints localise to a fraction of a pixel on a clean card: 1 px on the 200 px outline
+    assert logos.quad_error(logos.project(H_ab, corners), logos.project(H, corners)) < 1.0
+
+
+def test_registered_references_share_one_frame(marks):
+    """References of one brand chained a -> b -> c are mapped into the anchor's pixels; a lone brand stays apart."""
+    gray = cv2.cvtColor(marks["brand0"], cv2.COLOR_BGR2GRAY)
+    H1 = _view((130, 130), 0.9, 20, PERSP)
+    refs = [logos.Reference("brand0", "a", detect(gray, "sift"), (200, 200)),
+            _warped_reference(marks["brand0"], H1, "b"),
+            logos.Reference("brand1", "c", detect(cv2.cvtColor(marks["brand1"], cv2.COLOR_BGR2GRAY), "sift"),
+                            (200, 200))]
+    g = logos.build_gallery(refs, register=True)
+    assert g.frame_of_ref[0] == g.frame_of_ref[1] != g.frame_of_ref[2]
+    f = g.frame_of_ref[0]
+    anchor = int(g.anchors[f])
+    other = 1 - anchor
+    # mapping the other reference into the anchor and then back by the known view is the identity (within 1 px)
+    T = g.to_frame[other]
+    truth = H1 if anchor == 1 else np.linalg.inv(H1)
+    pts = logos.outline((200, 200)) if other == 0 else logos.outline((260, 260))
+    assert logos.quad_error(logos.project(T, pts), logos.project(truth, pts)) < 1.0
+    np.testing.assert_allclose(g.to_frame[anchor], np.eye(3))
+
+
+def test_pooled_frame_recognises_the_logo(marks):
+    """With registration on, the best hypothesis pools both references and still outlines the card correctly."""
+    gray = cv2.cvtColor(marks["brand0"], cv2.COLOR_BGR2GRAY)
+    H1 = _view((130, 130), 0.9, 20, PERSP)
+    refs = [logos.Reference("brand0", "a", detect(gray, "sift"), (200, 200)),
+            _warped_reference(marks["brand0"], H1, "b"),
+            logos.Reference("brand1", "c", detect(cv2.cvtColor(marks["brand1"], cv2.COLOR_BGR2GRAY), "sift"),
+                            (200, 200))]
+    g = logos.build_gallery(refs, register=True)
+    H = _view((300, 240), 0.8, -15, PERSP)
+    det = logos.recognize(g, detect(_scene(marks["brand0"], H), "sift"), (640, 480), rng=0)
+    assert det.brand == "brand0"
+    anchor = det.best.reference
+    ref_outline = g.references[anchor].outline
+    # the anchor's outline in the scene: the scene view composed with the anchor's own view of the card
+    to_card = np.eye(3) if anchor == 0 else np.linalg.inv(H1)
+    assert logos.quad_error(det.quad, logos.project(H @ to_card, ref_outline)) < 2.5
+    assert len(det.best.reference_xy) == det.best.inliers == len(det.best.pair_refs)
+
+
+def test_map_poses_follows_detector_angles(marks):
+    """Orientation and size predicted through a known rotation + scale agree with what SIFT measures (OpenCV's
+    angle is in image axes, y down): median errors below 2 degrees and 3 %."""
+    gray = cv2.cvtColor(marks["brand2"], cv2.COLOR_BGR2GRAY)
+    M = cv2.getRotationMatrix2D((100, 100), 35, 1.3)
+    M[:, 2] += 30
+    moved = cv2.warpAffine(gray, M, (320, 320), borderValue=255)
+    a, b = detect(gray, "sift"), detect(moved, "sift")
+    m = cv2.BFMatcher(cv2.NORM_L2, crossCheck=True).match(a.descriptors, b.descriptors)
+    ia, ib = np.array([x.queryIdx for x in m]), np.array([x.trainIdx for x in m])
+    H = np.r_[M, [[0, 0, 1]]]
+    ok = np.linalg.norm(logos.project(H, a.xy[ia]) - b.xy[ib], axis=1) < 1.5
+    assert ok.sum() >= 20
+    pose = np.c_[a.angle[ia[ok]], np.log(a.size[ia[ok]])].astype(np.float64)
+    pred = logos.map_poses(H, a.xy[ia[ok]], pose)
+    d_angle = np.abs((pred[:, 0] - b.angle[ib[ok]] + 180) % 360 - 180)
+    assert np.median(d_angle) < 2.0
+    assert np.median(np.abs(pred[:, 1] - np.log(b.size[ib[ok]]))) < np.log(1.03)
+    assert logos.pose_agrees(pred, np.c_[b.angle[ib[ok]], np.log(b.size[ib[ok]])], 30.0, 2.0).mean() > 0.9
+
+
+def test_pose_agreement_strengthens_the_score():
+    """Agreement in orientation and scale is evidence: the same counts score higher, and 4 inliers can count."""
+    p = logos.pose_probability(30.0, 2.0)
+    assert 0 < p < 0.1
+    assert logos.pose_probability(180.0, 16.0) == 1.0
+    assert logos.significance(8, 40, 4.0, 300 * 300, 10, p) > logos.significance(8, 40, 4.0, 300 * 300, 10)
+    assert logos.significance(4, 40, 4.0, 300 * 300, 10) == -np.inf
+    assert np.isfinite(logos.significance(4, 40, 4.0, 300 * 300, 10, p))
+
+
+def test_affine_ransac_rejects_pose_contradictions():
+    """Points that fit the map in position but not in orientation are not inliers when poses are given."""
+    rng = np.random.default_rng(3)
+    src = rng.uniform(0, 200, (30, 2))
+    A = np.array([[0.8, -0.3, 50.0], [0.3, 0.8, 20.0], [0, 0, 1]])
+    dst = logos.project(A, src)
+    src_pose = np.c_[rng.uniform(0, 360, 30), np.zeros(30)]
+    dst_pose = logos.map_poses(A, src, src_pose)
+    dst_pose[:10, 0] += 90.0  # the first 10 keypoints point elsewhere
+    _, inl = logos.affine_ransac(src, dst, 3.0, rng=0)
+    assert inl.all()
+    _, inl = logos.affine_ransac(src, dst, 3.0, rng=0, src_pose=src_pose, dst_pose=dst_pose, angle_tolerance=30.0,
+                                 scale_tolerance=2.0)
+    assert not inl[:10].any() and inl[10:].all()
+
+
+def test_bench_scene_scale_validated(tmp_path, capsys):
+    assert cli.main(["bench", "logo", "--data", str(tmp_path), "--scene-scale", "2"]) != 0
+    assert "`--scene-scale` must be in" in capsys.readouterr().err
+
+
+def test_cli_min_long_side_validated(gallery_dir, capsys):
+    assert cli.main(["logo", str(gallery_dir / "brand0.png"), "--gallery", str(gallery_dir),
+                     "--min-long-side", "-5"]) != 0
+    assert "`--min-long-side` must be" in capsys.readouterr().err

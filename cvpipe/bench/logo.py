@@ -20,13 +20,14 @@ import statistics
 import time
 from pathlib import Path
 
+import cv2
 import numpy as np
 from tqdm import tqdm
 
 from .. import io, logos
 from ..errors import InputError
 from ..features import DETECTORS, detect
-from ..params import FeaturesParams, LogoMatchParams, LogoVerifyParams, load_section
+from ..params import LogoFeaturesParams, LogoMatchParams, LogoVerifyParams, load_section
 
 HELP = "logo recognition on the FlickrLogos-27 subset: precision, recall, accuracy, PR curve, time per scene"
 EXAMPLE = "cvpipe bench logo --data ../shared/data --json"
@@ -47,6 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--protocol", choices=["test", "loo"], default="test",
                         help="test: the 70 test scenes (default); loo: leave-one-photo-out over the boxed training "
                              "photos, the protocol the parameters are tuned on")
+    parser.add_argument("--scene-scale", type=float, default=1.0,
+                        help="shrink every scene photo by this factor before detection (0.5 turns the training "
+                             "photos' prominent logos into small ones, as in many query photos; default 1)")
     parser.add_argument("--json", action="store_true", help="print the full result (with PR curves) as JSON")
 
 
@@ -88,6 +92,14 @@ def load_subset(root: Path, min_box: int = 16) -> tuple[list[tuple[str, str, np.
     return gallery, tests
 
 
+def _shrink(gray: np.ndarray, scale: float) -> np.ndarray:
+    """The scene photo shrunk by ``scale`` (area interpolation), or as it is for 1."""
+    if scale == 1.0:
+        return gray
+    h, w = gray.shape
+    return cv2.resize(gray, (max(1, round(w * scale)), max(1, round(h * scale))), interpolation=cv2.INTER_AREA)
+
+
 def _mask(shape: tuple[int, int], box: tuple | None) -> np.ndarray | None:
     if box is None:
         return None
@@ -97,35 +109,35 @@ def _mask(shape: tuple[int, int], box: tuple | None) -> np.ndarray | None:
     return mask
 
 
-def _params(path: str) -> tuple[FeaturesParams, LogoMatchParams, LogoVerifyParams]:
+def _params(path: str) -> tuple[LogoFeaturesParams, LogoMatchParams, LogoVerifyParams]:
     if Path(path).is_file():
-        return (load_section(FeaturesParams, "logo.features", path), load_section(LogoMatchParams, "logo.match", path),
-                load_section(LogoVerifyParams, "logo.verify", path))
-    return FeaturesParams(), LogoMatchParams(), LogoVerifyParams()
+        return (load_section(LogoFeaturesParams, "logo.features", path),
+                load_section(LogoMatchParams, "logo.match", path), load_section(LogoVerifyParams, "logo.verify", path))
+    return LogoFeaturesParams(), LogoMatchParams(), LogoVerifyParams()
 
 
-def run_benchmark(root: Path, methods: list[str], fp: FeaturesParams, mp: LogoMatchParams, vp: LogoVerifyParams,
-                  min_box: int = 16, seed: int = 0) -> dict:
+def run_benchmark(root: Path, methods: list[str], fp: LogoFeaturesParams, mp: LogoMatchParams, vp: LogoVerifyParams,
+                  min_box: int = 16, seed: int = 0, scene_scale: float = 1.0) -> dict:
     """Run every method on the subset; returns per-method metrics, curves, per-scene answers and timings."""
     gallery_imgs, tests = load_subset(root, min_box)
     galleries, gallery_time = {}, {}
     for m in methods:
         t0 = time.perf_counter()
-        refs = [logos.Reference(b, n, detect(g, m, fp.max_features, _mask(g.shape, box)), (g.shape[1], g.shape[0]),
+        refs = [logos.Reference(b, n, detect(g, m, fp.max_features, _mask(g.shape, box), fp.min_long_side), (g.shape[1], g.shape[0]),
                                 box) for b, n, g, box in gallery_imgs]
-        galleries[m] = logos.build_gallery(refs, mp.min_features, mp.reference_features)
+        galleries[m] = logos.build_gallery(refs, mp.min_features, mp.reference_features, mp.register_references)
         gallery_time[m] = time.perf_counter() - t0
-    scenes = [(f, b, io.read_image(root / f, "gray")) for f, b in tests]
+    scenes = [(f, b, _shrink(io.read_image(root / f, "gray"), scene_scale)) for f, b in tests]
     # warm-up: one scene per method (FLANN, OpenCV thread pools, scipy imports)
     for m in methods:
         g = scenes[0][2]
-        logos.recognize(galleries[m], detect(g, m, fp.max_features), (g.shape[1], g.shape[0]), mp, vp, seed)
+        logos.recognize(galleries[m], detect(g, m, fp.max_features, min_long_side=fp.min_long_side), (g.shape[1], g.shape[0]), mp, vp, seed)
     times = {m: [] for m in methods}
     answers = {m: [] for m in methods}
     for f, brand, g in tqdm(scenes, desc="logo bench", disable=None):
         for m in methods:  # interleaved, so load changes on the shared machine hit every method alike
             t0 = time.perf_counter()
-            det = logos.recognize(galleries[m], detect(g, m, fp.max_features), (g.shape[1], g.shape[0]), mp, vp, seed)
+            det = logos.recognize(galleries[m], detect(g, m, fp.max_features, min_long_side=fp.min_long_side), (g.shape[1], g.shape[0]), mp, vp, seed)
             times[m].append(time.perf_counter() - t0)
             best = det.best
             answers[m].append({"scene": f, "truth": brand, "brand": det.brand,
@@ -134,7 +146,7 @@ def run_benchmark(root: Path, methods: list[str], fp: FeaturesParams, mp: LogoMa
     result = {"protocol": {"gallery_references": {m: len(galleries[m].references) for m in methods},
                            "gallery_dropped": {m: len(galleries[m].dropped) for m in methods},
                            "test_scenes": len(tests), "with_logo": sum(b is not None for _, b in tests),
-                           "score_threshold": vp.score_threshold},
+                           "score_threshold": vp.score_threshold, "scene_scale": scene_scale},
               "methods": {}}
     for m in methods:
         a = answers[m]
@@ -148,8 +160,8 @@ def run_benchmark(root: Path, methods: list[str], fp: FeaturesParams, mp: LogoMa
     return result
 
 
-def run_leave_one_out(root: Path, methods: list[str], fp: FeaturesParams, mp: LogoMatchParams,
-                      vp: LogoVerifyParams, min_box: int = 16, seed: int = 0) -> dict:
+def run_leave_one_out(root: Path, methods: list[str], fp: LogoFeaturesParams, mp: LogoMatchParams,
+                      vp: LogoVerifyParams, min_box: int = 16, seed: int = 0, scene_scale: float = 1.0) -> dict:
     """The tuning protocol (see the module docstring): per-method metrics and per-scene answers, no timings."""
     gallery_imgs, _ = load_subset(root, min_box)
     photos: dict[str, tuple[str, np.ndarray]] = {}
@@ -157,18 +169,23 @@ def run_leave_one_out(root: Path, methods: list[str], fp: FeaturesParams, mp: Lo
         if box is not None:
             photos.setdefault(name.split("[")[0], (brand, gray))
     result: dict = {"protocol": {"name": "leave-one-photo-out", "photos": len(photos), "scenes": 2 * len(photos),
-                                 "score_threshold": vp.score_threshold}, "methods": {}}
+                                 "score_threshold": vp.score_threshold, "scene_scale": scene_scale},
+                    "methods": {}}
     for m in methods:
         refs = [(n.split("[")[0] if box is not None else None,
-                 logos.Reference(b, n, detect(g, m, fp.max_features, _mask(g.shape, box)), (g.shape[1], g.shape[0]),
+                 logos.Reference(b, n, detect(g, m, fp.max_features, _mask(g.shape, box), fp.min_long_side), (g.shape[1], g.shape[0]),
                                  box)) for b, n, g, box in gallery_imgs]
+        # the links between references of one brand do not depend on which others are left out: found once
+        links = logos.reference_links([r for _, r in refs]) if mp.register_references else None
         answers = []
         for photo, (brand, gray) in tqdm(sorted(photos.items()), desc=f"loo {m}", disable=None):
-            scene = detect(gray, m, fp.max_features)
+            small = _shrink(gray, scene_scale)
+            scene = detect(small, m, fp.max_features, min_long_side=fp.min_long_side)
             for truth in (brand, None):
                 keep = [r for src, r in refs if src != photo and (truth is not None or r.brand != brand)]
-                gallery = logos.build_gallery(keep, mp.min_features, mp.reference_features)
-                det = logos.recognize(gallery, scene, (gray.shape[1], gray.shape[0]), mp, vp, seed)
+                gallery = logos.build_gallery(keep, mp.min_features, mp.reference_features, mp.register_references,
+                                              links)
+                det = logos.recognize(gallery, scene, (small.shape[1], small.shape[0]), mp, vp, seed)
                 answers.append({"scene": photo, "truth": truth, "brand": det.brand,
                                 "best_brand": det.best.brand if det.best else None, "score": det.score,
                                 "inliers": det.inliers})
@@ -191,6 +208,8 @@ def _summarise(ev: dict) -> None:
 def run(args: argparse.Namespace) -> int:
     if not args.data:
         raise InputError("no data root: pass --data DIR or set CVPIPE_DATA")
+    if not 0.05 <= args.scene_scale <= 1.0:
+        raise InputError(f"`--scene-scale` must be in [0.05, 1], got {args.scene_scale}")
     if args.min_box < 1:
         raise InputError(f"`--min-box` must be a positive number of pixels, got {args.min_box}")
     root = Path(args.data)
@@ -198,25 +217,27 @@ def run(args: argparse.Namespace) -> int:
         root = root / SUBSET
     fp, mp, vp = _params(args.params)
     if args.protocol == "loo":
-        res = run_leave_one_out(root, args.methods, fp, mp, vp, args.min_box, args.seed)
+        res = run_leave_one_out(root, args.methods, fp, mp, vp, args.min_box, args.seed, args.scene_scale)
         if args.json:
             print(io.dumps_json(res))
             return 0
         pr = res["protocol"]
         print(f"FlickrLogos-27 subset, leave-one-photo-out: {pr['photos']} training photos, each as a scene with its "
-              f"brand and without it ({pr['scenes']} scenes), score threshold {pr['score_threshold']}")
+              f"brand and without it ({pr['scenes']} scenes), score threshold {pr['score_threshold']}, scenes "
+              f"scaled by {pr['scene_scale']}")
         print(f"{'method':8s} {'precision':>9s} {'recall':>7s} {'accuracy':>8s} {'R@P>=0.95':>9s}")
         for m, ev in res["methods"].items():
             print(f"{m:8s} {ev['precision']:9.3f} {ev['recall']:7.3f} {ev['accuracy']:8.3f} "
                   f"{ev['best_recall_at_precision_0.95']:9.3f}")
         return 0
-    res = run_benchmark(root, args.methods, fp, mp, vp, args.min_box, args.seed)
+    res = run_benchmark(root, args.methods, fp, mp, vp, args.min_box, args.seed, args.scene_scale)
     if args.json:
         print(io.dumps_json(res))
         return 0
     pr = res["protocol"]
     print(f"FlickrLogos-27 subset: {pr['test_scenes']} test scenes ({pr['with_logo']} with a logo), gallery "
-          f"{pr['gallery_references']} references, score threshold {pr['score_threshold']}")
+          f"{pr['gallery_references']} references, score threshold {pr['score_threshold']}, scenes scaled by "
+          f"{pr['scene_scale']}")
     print(f"{'method':8s} {'precision':>9s} {'recall':>7s} {'accuracy':>8s} {'P@R>=0.70':>9s} {'R@P>=0.95':>9s} "
           f"{'s/scene':>8s}")
     for m, ev in res["methods"].items():

@@ -10,7 +10,7 @@ from pathlib import Path
 from .. import io, logos
 from ..errors import CvpipeError, InputError
 from ..features import DETECTORS, detect
-from ..params import FeaturesParams, LogoMatchParams, LogoVerifyParams
+from ..params import LogoFeaturesParams, LogoMatchParams, LogoVerifyParams
 
 HELP = "recognise gallery logos in scene photos (brand or none, and the logo outline)"
 EXAMPLE = "cvpipe logo data/samples/logo/scenes/scene_00.jpg --gallery data/samples/logo/gallery --json"
@@ -36,14 +36,15 @@ def gallery_files(folder: str | Path) -> list[tuple[str, Path]]:
     return sorted(items, key=lambda t: (t[0], str(t[1])))
 
 
-def load_gallery(folder: str | Path, detector: str, max_features: int, min_features: int,
-                 reference_features: int | None = None) -> logos.Gallery:
+def load_gallery(folder: str | Path, detector: str, max_features: int, params: LogoMatchParams,
+                 min_long_side: int = 0) -> logos.Gallery:
     """Read, detect and index a gallery folder (see :func:`gallery_files`)."""
     refs = []
     for brand, f in gallery_files(folder):
         gray = io.read_image(f, "gray")
-        refs.append(logos.Reference(brand, str(f), detect(gray, detector, max_features), (gray.shape[1], gray.shape[0])))
-    return logos.build_gallery(refs, min_features, reference_features)
+        refs.append(logos.Reference(brand, str(f), detect(gray, detector, max_features, min_long_side=min_long_side),
+                                    (gray.shape[1], gray.shape[0])))
+    return logos.build_gallery(refs, params.min_features, params.reference_features, params.register_references)
 
 
 def detection_json(scene: str, det: logos.Detection) -> dict:
@@ -54,7 +55,7 @@ def detection_json(scene: str, det: logos.Detection) -> dict:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    fp, mp, vp = FeaturesParams(), LogoMatchParams(), LogoVerifyParams()
+    fp, mp, vp = LogoFeaturesParams(), LogoMatchParams(), LogoVerifyParams()
     parser.add_argument("scenes", nargs="+", metavar="SCENE", help="scene photos")
     parser.add_argument("--gallery", required=True, metavar="DIR",
                         help="reference logos: DIR/<brand>.<ext> or DIR/<brand>/*.<ext>")
@@ -62,6 +63,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"keypoint detector (default {fp.detector})")
     parser.add_argument("--max-features", type=int, default=fp.max_features,
                         help=f"keypoints per image (default {fp.max_features})")
+    parser.add_argument("--min-long-side", type=int, default=fp.min_long_side,
+                        help=f"enlarge smaller photos to this long side before detection, 0 = never "
+                             f"(default {fp.min_long_side})")
     parser.add_argument("--ratio", type=float, default=mp.ratio, help=f"ratio test (default {mp.ratio})")
     parser.add_argument("--threshold", type=float, default=vp.score_threshold,
                         help=f"score (-log10 NFA) needed to name a brand (default {vp.score_threshold})")
@@ -77,12 +81,15 @@ def run(args: argparse.Namespace) -> int:
         vp = LogoVerifyParams(score_threshold=args.threshold)
     except ValueError as exc:
         raise InputError(str(exc).replace("`ratio`", "`--ratio`")) from exc
-    gallery = load_gallery(args.gallery, args.method, args.max_features, mp.min_features, mp.reference_features)
+    if args.min_long_side < 0:
+        raise InputError(f"`--min-long-side` must be a non-negative number of pixels, got {args.min_long_side}")
+    gallery = load_gallery(args.gallery, args.method, args.max_features, mp, args.min_long_side)
     records, failed = [], 0
     for scene in args.scenes:
         try:
             gray = io.read_image(scene, "gray")
-            det = logos.recognize(gallery, detect(gray, args.method, args.max_features),
+            det = logos.recognize(gallery, detect(gray, args.method, args.max_features,
+                                                  min_long_side=args.min_long_side),
                                   (gray.shape[1], gray.shape[0]), mp, vp, args.seed)
             records.append(detection_json(scene, det))
         except CvpipeError as exc:
