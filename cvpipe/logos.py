@@ -8,10 +8,16 @@ matches is verified by a RANSAC homography (:func:`cvpipe.homography.find_homogr
 affine RANSAC has picked the consistent matches, see :data:`MODELS`) and plausibility checks on it: the projected reference outline must be convex and not mirrored, of sane area relative to the scene, without
 extreme anisotropy or perspective, and the inliers must cover a fair part of the reference.
 
+An inlier must land within the RANSAC threshold of its predicted position *and* agree with the model in keypoint
+orientation and scale (the reference keypoint's angle and size carried through the model's local Jacobian,
+:func:`map_poses`): a chance match agrees in all three far less often than in position alone, which keeps chance
+fits rare on busy, enlarged scenes. References of one brand that register to each other can optionally be mapped
+into one shared frame (:func:`register_references`) and verified as one model.
+
 The score is an a-contrario significance, ``-log10`` of the expected number of equally good chance fits: the
-binomial tail of seeing ``inliers - 4`` of the ``matches - 4`` other matches land within the RANSAC threshold of
-their prediction when they are spread at random over the scene, multiplied by the number of 4-point hypotheses and
-of references tried. Unlike a raw inlier count, it does not grow with the number of
+binomial tail of seeing ``inliers - 4`` of the ``matches - 4`` other matches agree with their prediction when they
+are spread at random over the scene with random orientations and scales, times the chance that the 4 sample
+matches agree in orientation and scale, multiplied by the number of 4-point hypotheses and of references tried. Unlike a raw inlier count, it does not grow with the number of
 tentative matches that a cluttered scene or a feature-rich reference produces, so it is comparable across brands
 and separates true logos from the 6-10 inlier fits that RANSAC finds on any busy photo.
 

@@ -474,14 +474,16 @@ SECTIONS.update({
 
 @dataclass(frozen=True)
 class LogoFeaturesParams(FeaturesParams):
-    """``logo.features``: keypoints of gallery and scene photos. ``min_long_side`` enlarges smaller photos before
-    detection (:func:`cvpipe.features.detect`), so that logos a few dozen pixels wide still get keypoints."""
+    """``logo.features``: keypoints of gallery and scene photos. ``scene_min_long_side`` enlarges smaller scene
+    photos before detection (:func:`cvpipe.features.detect`), so that logos a few dozen pixels wide still get
+    keypoints. Gallery images keep their size: an isolated logo crop enlarged several times would leave the scale
+    range of the binary detectors' pyramids."""
 
-    min_long_side: int = 800
+    scene_min_long_side: int = 800
 
     def __post_init__(self):
         super().__post_init__()
-        _in_range("min_long_side", self.min_long_side, 0, 10_000)
+        _in_range("scene_min_long_side", self.scene_min_long_side, 0, 10_000)
 
 
 @dataclass(frozen=True)

@@ -123,7 +123,7 @@ def run_benchmark(root: Path, methods: list[str], fp: LogoFeaturesParams, mp: Lo
     galleries, gallery_time = {}, {}
     for m in methods:
         t0 = time.perf_counter()
-        refs = [logos.Reference(b, n, detect(g, m, fp.max_features, _mask(g.shape, box), fp.min_long_side), (g.shape[1], g.shape[0]),
+        refs = [logos.Reference(b, n, detect(g, m, fp.max_features, _mask(g.shape, box)), (g.shape[1], g.shape[0]),
                                 box) for b, n, g, box in gallery_imgs]
         galleries[m] = logos.build_gallery(refs, mp.min_features, mp.reference_features, mp.register_references)
         gallery_time[m] = time.perf_counter() - t0
@@ -131,13 +131,15 @@ def run_benchmark(root: Path, methods: list[str], fp: LogoFeaturesParams, mp: Lo
     # warm-up: one scene per method (FLANN, OpenCV thread pools, scipy imports)
     for m in methods:
         g = scenes[0][2]
-        logos.recognize(galleries[m], detect(g, m, fp.max_features, min_long_side=fp.min_long_side), (g.shape[1], g.shape[0]), mp, vp, seed)
+        logos.recognize(galleries[m], detect(g, m, fp.max_features, min_long_side=fp.scene_min_long_side),
+                        (g.shape[1], g.shape[0]), mp, vp, seed)
     times = {m: [] for m in methods}
     answers = {m: [] for m in methods}
     for f, brand, g in tqdm(scenes, desc="logo bench", disable=None):
         for m in methods:  # interleaved, so load changes on the shared machine hit every method alike
             t0 = time.perf_counter()
-            det = logos.recognize(galleries[m], detect(g, m, fp.max_features, min_long_side=fp.min_long_side), (g.shape[1], g.shape[0]), mp, vp, seed)
+            feats = detect(g, m, fp.max_features, min_long_side=fp.scene_min_long_side)
+            det = logos.recognize(galleries[m], feats, (g.shape[1], g.shape[0]), mp, vp, seed)
             times[m].append(time.perf_counter() - t0)
             best = det.best
             answers[m].append({"scene": f, "truth": brand, "brand": det.brand,
@@ -173,14 +175,14 @@ def run_leave_one_out(root: Path, methods: list[str], fp: LogoFeaturesParams, mp
                     "methods": {}}
     for m in methods:
         refs = [(n.split("[")[0] if box is not None else None,
-                 logos.Reference(b, n, detect(g, m, fp.max_features, _mask(g.shape, box), fp.min_long_side), (g.shape[1], g.shape[0]),
+                 logos.Reference(b, n, detect(g, m, fp.max_features, _mask(g.shape, box)), (g.shape[1], g.shape[0]),
                                  box)) for b, n, g, box in gallery_imgs]
         # the links between references of one brand do not depend on which others are left out: found once
         links = logos.reference_links([r for _, r in refs]) if mp.register_references else None
         answers = []
         for photo, (brand, gray) in tqdm(sorted(photos.items()), desc=f"loo {m}", disable=None):
             small = _shrink(gray, scene_scale)
-            scene = detect(small, m, fp.max_features, min_long_side=fp.min_long_side)
+            scene = detect(small, m, fp.max_features, min_long_side=fp.scene_min_long_side)
             for truth in (brand, None):
                 keep = [r for src, r in refs if src != photo and (truth is not None or r.brand != brand)]
                 gallery = logos.build_gallery(keep, mp.min_features, mp.reference_features, mp.register_references,

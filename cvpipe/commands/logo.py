@@ -36,13 +36,12 @@ def gallery_files(folder: str | Path) -> list[tuple[str, Path]]:
     return sorted(items, key=lambda t: (t[0], str(t[1])))
 
 
-def load_gallery(folder: str | Path, detector: str, max_features: int, params: LogoMatchParams,
-                 min_long_side: int = 0) -> logos.Gallery:
+def load_gallery(folder: str | Path, detector: str, max_features: int, params: LogoMatchParams) -> logos.Gallery:
     """Read, detect and index a gallery folder (see :func:`gallery_files`)."""
     refs = []
     for brand, f in gallery_files(folder):
         gray = io.read_image(f, "gray")
-        refs.append(logos.Reference(brand, str(f), detect(gray, detector, max_features, min_long_side=min_long_side),
+        refs.append(logos.Reference(brand, str(f), detect(gray, detector, max_features),
                                     (gray.shape[1], gray.shape[0])))
     return logos.build_gallery(refs, params.min_features, params.reference_features, params.register_references)
 
@@ -63,9 +62,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"keypoint detector (default {fp.detector})")
     parser.add_argument("--max-features", type=int, default=fp.max_features,
                         help=f"keypoints per image (default {fp.max_features})")
-    parser.add_argument("--min-long-side", type=int, default=fp.min_long_side,
-                        help=f"enlarge smaller photos to this long side before detection, 0 = never "
-                             f"(default {fp.min_long_side})")
+    parser.add_argument("--min-long-side", type=int, default=fp.scene_min_long_side,
+                        help=f"enlarge smaller scene photos to this long side before detection, 0 = never "
+                             f"(default {fp.scene_min_long_side})")
     parser.add_argument("--ratio", type=float, default=mp.ratio, help=f"ratio test (default {mp.ratio})")
     parser.add_argument("--threshold", type=float, default=vp.score_threshold,
                         help=f"score (-log10 NFA) needed to name a brand (default {vp.score_threshold})")
@@ -83,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(str(exc).replace("`ratio`", "`--ratio`")) from exc
     if args.min_long_side < 0:
         raise InputError(f"`--min-long-side` must be a non-negative number of pixels, got {args.min_long_side}")
-    gallery = load_gallery(args.gallery, args.method, args.max_features, mp, args.min_long_side)
+    gallery = load_gallery(args.gallery, args.method, args.max_features, mp)
     records, failed = [], 0
     for scene in args.scenes:
         try:
