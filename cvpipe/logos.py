@@ -334,6 +334,9 @@ def build_gallery(references: Sequence[Reference], min_features: int = 8,
     else:
         matcher = cv2.FlannBasedMatcher({"algorithm": _FLANN_KDTREE, "trees": 4}, {"checks": 64})
     matcher.add([desc])
+    # FLANN's randomised kd-trees draw from OpenCV's global generator: seeding it here makes the index (and so every
+    # answer) a function of the gallery alone, not of whatever ran before in the process (this resets cv2's RNG)
+    cv2.setRNGSeed(0)
     matcher.train()
     brand_of_ref = np.array([brands.index(r.brand) for r in usable], np.int64)
     if not register:

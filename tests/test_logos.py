@@ -613,3 +613,16 @@ def test_cli_min_long_side_validated(gallery_dir, capsys):
     assert cli.main(["logo", str(gallery_dir / "brand0.png"), "--gallery", str(gallery_dir),
                      "--min-long-side", "-5"]) != 0
     assert "`--min-long-side` must be" in capsys.readouterr().err
+
+
+def test_gallery_index_does_not_depend_on_call_order(marks):
+    """The FLANN kd-trees are randomised: building the same gallery twice, with other random work in between, must
+    give the same matches (the index is seeded)."""
+    refs = [logos.Reference(b, b, detect(cv2.cvtColor(m, cv2.COLOR_BGR2GRAY), "sift"), (200, 200))
+            for b, m in marks.items()]
+    scene = detect(_scene(marks["brand1"], _view((320, 240), 0.7, 10, PERSP)), "sift")
+    first = logos.match_scene(logos.build_gallery(refs), scene)
+    cv2.randu(np.zeros((50, 50), np.uint8), 0, 255)  # advance OpenCV's global generator
+    second = logos.match_scene(logos.build_gallery(refs), scene)
+    for a, b in zip(first.to_arrays().values(), second.to_arrays().values()):
+        np.testing.assert_array_equal(a, b)
