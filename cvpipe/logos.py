@@ -5,8 +5,9 @@ once; every scene descriptor is matched against the whole gallery in one k-neare
 ratio test compares the best neighbour of a brand with the best neighbour of any *other* brand (so several
 reference photos of the same brand do not reject each other's matches). Each reference with enough tentative
 matches is verified by a RANSAC homography (:func:`cvpipe.homography.find_homography`; for SIFT by default after an
-affine RANSAC has picked the consistent matches, see :data:`MODELS`) and plausibility checks on it: the projected reference outline must be convex and not mirrored, of sane area relative to the scene, without
-extreme anisotropy or perspective, and the inliers must cover a fair part of the reference.
+affine RANSAC has picked the consistent matches, see :data:`MODELS`) and plausibility checks on it: the projected
+reference outline must be convex and not mirrored, of sane area relative to the scene, without extreme anisotropy
+or perspective, and the inliers must cover a fair part of the reference.
 
 An inlier must land within the RANSAC threshold of its predicted position *and* agree with the model in keypoint
 orientation and scale (the reference keypoint's angle and size carried through the model's local Jacobian,
@@ -17,9 +18,10 @@ into one shared frame (:func:`register_references`) and verified as one model.
 The score is an a-contrario significance, ``-log10`` of the expected number of equally good chance fits: the
 binomial tail of seeing ``inliers - 4`` of the ``matches - 4`` other matches agree with their prediction when they
 are spread at random over the scene with random orientations and scales, times the chance that the 4 sample
-matches agree in orientation and scale, multiplied by the number of 4-point hypotheses and of references tried. Unlike a raw inlier count, it does not grow with the number of
-tentative matches that a cluttered scene or a feature-rich reference produces, so it is comparable across brands
-and separates true logos from the 6-10 inlier fits that RANSAC finds on any busy photo.
+matches agree in orientation and scale, multiplied by the number of 4-point hypotheses and of references tried.
+Unlike a raw inlier count, it does not grow with the number of tentative matches that a cluttered scene or a
+feature-rich reference produces, so it is comparable across brands and separates true logos from the 6-10 inlier
+fits that RANSAC finds on any busy photo.
 
 The module takes arrays only; reading the gallery folder lives in the command, stage and benchmark code.
 """
@@ -27,7 +29,7 @@ The module takes arrays only; reading the gallery folder lives in the command, s
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import cv2
@@ -385,8 +387,7 @@ def reference_links(references: Sequence[Reference], ratio: float = 0.8, thresho
     binary = DETECTORS[refs[0].features.detector][1]
     matcher = cv2.BFMatcher(cv2.NORM_HAMMING if binary else cv2.NORM_L2)
     desc = [_prepare(r.features.descriptors, binary) for r in refs]
-    link_params = LogoVerifyParams(**{**{f: getattr(p, f) for f in p.__dataclass_fields__},
-                                      "min_area": 0.25, "max_area": 4.0})
+    link_params = replace(p, min_area=0.25, max_area=4.0)
     out: dict[tuple[str, str], tuple[np.ndarray, int]] = {}
     for i, j in itertools.combinations(range(len(refs)), 2):
         a, b = refs[i], refs[j]
