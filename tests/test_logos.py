@@ -516,15 +516,22 @@ def test_reference_links_recover_the_view_between_references(marks):
     assert logos.quad_error(logos.project(H_ab, corners), logos.project(H, corners)) < 1.0
 
 
-def test_registered_references_share_one_frame(marks):
-    """References of one brand chained a -> b -> c are mapped into the anchor's pixels; a lone brand stays apart."""
+@pytest.fixture(scope="module")
+def registered(marks) -> tuple[logos.Gallery, np.ndarray]:
+    """A registered gallery: brand0 as drawn ("a") and seen through the view ``H1`` ("b"), brand1 on its own ("c")."""
     gray = cv2.cvtColor(marks["brand0"], cv2.COLOR_BGR2GRAY)
     H1 = _view((130, 130), 0.9, 20, PERSP)
     refs = [logos.Reference("brand0", "a", detect(gray, "sift"), (200, 200)),
             _warped_reference(marks["brand0"], H1, "b"),
             logos.Reference("brand1", "c", detect(cv2.cvtColor(marks["brand1"], cv2.COLOR_BGR2GRAY), "sift"),
                             (200, 200))]
-    g = logos.build_gallery(refs, register=True)
+    return logos.build_gallery(refs, register=True), H1
+
+
+def test_registered_references_share_one_frame(registered):
+    """The two references of brand0 are mapped into the anchor's pixels by their true relative view; the lone
+    reference of brand1 keeps a frame of its own."""
+    g, H1 = registered
     assert g.frame_of_ref[0] == g.frame_of_ref[1] != g.frame_of_ref[2]
     f = g.frame_of_ref[0]
     anchor = int(g.anchors[f])
@@ -537,15 +544,9 @@ def test_registered_references_share_one_frame(marks):
     np.testing.assert_allclose(g.to_frame[anchor], np.eye(3))
 
 
-def test_pooled_frame_recognises_the_logo(marks):
+def test_pooled_frame_recognises_the_logo(registered, marks):
     """With registration on, the best hypothesis pools both references and still outlines the card correctly."""
-    gray = cv2.cvtColor(marks["brand0"], cv2.COLOR_BGR2GRAY)
-    H1 = _view((130, 130), 0.9, 20, PERSP)
-    refs = [logos.Reference("brand0", "a", detect(gray, "sift"), (200, 200)),
-            _warped_reference(marks["brand0"], H1, "b"),
-            logos.Reference("brand1", "c", detect(cv2.cvtColor(marks["brand1"], cv2.COLOR_BGR2GRAY), "sift"),
-                            (200, 200))]
-    g = logos.build_gallery(refs, register=True)
+    g, H1 = registered
     H = _view((300, 240), 0.8, -15, PERSP)
     det = logos.recognize(g, detect(_scene(marks["brand0"], H), "sift"), (640, 480), rng=0)
     assert det.brand == "brand0"
