@@ -479,7 +479,10 @@ def match_scene(gallery: Gallery, scene: Features, params: LogoMatchParams | Non
     Each scene descriptor gets its ``k`` nearest gallery descriptors. A neighbour of brand B is kept when its
     distance is below ``ratio`` times the distance of the nearest neighbour of any other brand (or of the k-th
     neighbour when all k belong to B), and at most the first ``per_reference`` neighbours in one reference count.
-    Afterwards every reference keypoint keeps only its closest scene keypoint.
+    With ``reverse_shortlist`` > 0, the references with the most such matches are also matched the other way, each
+    reference keypoint to its nearest scene keypoint with Lowe's ratio ``reverse_ratio`` (see
+    :func:`_reverse_matches`), and both sets are pooled. Afterwards every reference keypoint keeps only its
+    closest scene keypoint.
 
     Parameters
     ----------
@@ -487,7 +490,8 @@ def match_scene(gallery: Gallery, scene: Features, params: LogoMatchParams | Non
     scene : Features
         From the same detector as the gallery.
     params : LogoMatchParams, optional
-        ``ratio``, ``k`` and ``per_reference``; defaults from :class:`cvpipe.params.LogoMatchParams`.
+        ``ratio``, ``k``, ``per_reference``, ``reverse_shortlist`` and ``reverse_ratio``; defaults from
+        :class:`cvpipe.params.LogoMatchParams`.
     """
     p = params or LogoMatchParams()
     if scene.detector != gallery.detector:
@@ -525,12 +529,55 @@ def match_scene(gallery: Gallery, scene: Features, params: LogoMatchParams | Non
     m_ref = ref[rows, cols]
     m_gal = gallery.local_of[idx[rows, cols]]
     m_dist = dist[rows, cols]
+    if p.reverse_shortlist > 0:
+        r_ref, r_gal, r_rows, r_dist = _reverse_matches(gallery, scene, m_ref, rows, p)
+        m_ref, m_gal = np.r_[m_ref, r_ref], np.r_[m_gal, r_gal]
+        rows, m_dist = np.r_[rows, r_rows], np.r_[m_dist, r_dist]
     # one-to-one per reference: keep the closest scene keypoint of every reference keypoint
     order = np.lexsort((m_dist, m_gal, m_ref))
     m_ref, m_gal, rows, m_dist = m_ref[order], m_gal[order], rows[order], m_dist[order]
     first = np.ones(len(m_ref), bool)
     first[1:] = (m_ref[1:] != m_ref[:-1]) | (m_gal[1:] != m_gal[:-1])
-    return Matches(m_ref[first], m_gal[first], rows[first].astype(np.int64), m_dist[first])
+    return Matches(m_ref[first], m_gal[first], rows[first].astype(np.int64), m_dist[first].astype(np.float32))
+
+
+def _reverse_matches(gallery: Gallery, scene: Features, m_ref: np.ndarray, m_scene: np.ndarray,
+                     p: LogoMatchParams) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Reference -> scene matches of the ``reverse_shortlist`` references with the most forward-matched scene
+    keypoints (at least 2): each reference keypoint's nearest scene keypoint, kept when it is closer than
+    ``reverse_ratio`` times the second nearest (Lowe's test within the scene).
+
+    The forward test compares a scene keypoint's neighbours across the whole gallery, so a keypoint of a generic
+    shape (a ring, a letter's corner) that several brands share fails it even where the logo is plainly there; the
+    reverse test only asks whether the scene holds one clear counterpart of that reference keypoint.
+    """
+    empty = (np.zeros(0, np.int64),) * 3 + (np.zeros(0, np.float32),)
+    if len(scene) < 2 or len(m_ref) == 0:
+        return empty
+    pairs = np.unique(np.c_[m_ref, m_scene], axis=0)  # distinct scene keypoints per reference
+    counts = np.bincount(pairs[:, 0], minlength=len(gallery.references))
+    short = np.argsort(-counts, kind="stable")[:p.reverse_shortlist]
+    short = short[counts[short] >= 2]
+    if len(short) == 0:
+        return empty
+    if gallery.binary:
+        index = cv2.BFMatcher(cv2.NORM_HAMMING)
+    else:
+        index = cv2.FlannBasedMatcher({"algorithm": _FLANN_KDTREE, "trees": 4}, {"checks": 64})
+    index.add([_prepare(scene.descriptors, gallery.binary)])
+    cv2.setRNGSeed(0)  # the kd-trees draw from OpenCV's global generator (see build_gallery)
+    index.train()
+    out_ref, out_gal, out_scene, out_dist = [], [], [], []
+    for r in short:
+        desc = _prepare(gallery.references[int(r)].features.descriptors, gallery.binary)
+        for row in index.knnMatch(desc, k=2):
+            if len(row) == 2 and row[0].distance < p.reverse_ratio * row[1].distance:
+                out_ref.append(int(r))
+                out_gal.append(row[0].queryIdx)
+                out_scene.append(row[0].trainIdx)
+                out_dist.append(row[0].distance)
+    return (np.array(out_ref, np.int64), np.array(out_gal, np.int64), np.array(out_scene, np.int64),
+            np.array(out_dist, np.float32))
 
 
 # ------------------------------------------------------------------------------------------- verification
