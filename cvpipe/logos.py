@@ -560,24 +560,22 @@ def _reverse_matches(gallery: Gallery, scene: Features, m_ref: np.ndarray, m_sce
     short = short[counts[short] >= 2]
     if len(short) == 0:
         return empty
-    if gallery.binary:
-        index = cv2.BFMatcher(cv2.NORM_HAMMING)
-    else:
-        index = cv2.FlannBasedMatcher({"algorithm": _FLANN_KDTREE, "trees": 4}, {"checks": 64})
-    index.add([_prepare(scene.descriptors, gallery.binary)])
-    cv2.setRNGSeed(0)  # the kd-trees draw from OpenCV's global generator (see build_gallery)
-    index.train()
-    out_ref, out_gal, out_scene, out_dist = [], [], [], []
-    for r in short:
-        desc = _prepare(gallery.references[int(r)].features.descriptors, gallery.binary)
-        for row in index.knnMatch(desc, k=2):
-            if len(row) == 2 and row[0].distance < p.reverse_ratio * row[1].distance:
-                out_ref.append(int(r))
-                out_gal.append(row[0].queryIdx)
-                out_scene.append(row[0].trainIdx)
-                out_dist.append(row[0].distance)
-    return (np.array(out_ref, np.int64), np.array(out_gal, np.int64), np.array(out_scene, np.int64),
-            np.array(out_dist, np.float32))
+    desc = [_prepare(gallery.references[int(r)].features.descriptors, gallery.binary) for r in short]
+    query = np.concatenate(desc)
+    scene_desc = _prepare(scene.descriptors, gallery.binary)
+    if gallery.binary:  # exact Hamming search, one call for every shortlisted reference
+        knn = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(query, scene_desc, k=2)
+        nn = np.array([[m.trainIdx for m in row] for row in knn], np.int64)
+        dist = np.array([[m.distance for m in row] for row in knn], np.float32)
+    else:  # kd-trees over the scene; numpy in and out (no per-match Python objects)
+        cv2.setRNGSeed(0)  # the kd-trees draw from OpenCV's global generator (see build_gallery)
+        index = cv2.flann_Index(scene_desc, {"algorithm": _FLANN_KDTREE, "trees": 4})
+        nn, dist2 = index.knnSearch(query, 2, params={"checks": 32})
+        nn, dist = nn.astype(np.int64), np.sqrt(np.maximum(dist2, 0)).astype(np.float32)  # FLANN's L2 is squared
+    keep = (nn[:, 1] >= 0) & (dist[:, 0] < p.reverse_ratio * dist[:, 1])
+    ref = np.repeat(short.astype(np.int64), [len(d) for d in desc])
+    local = np.concatenate([np.arange(len(d), dtype=np.int64) for d in desc])
+    return ref[keep], local[keep], nn[keep, 0], dist[keep, 0]
 
 
 # ------------------------------------------------------------------------------------------- verification
