@@ -496,7 +496,7 @@ class LogoMatchParams:
     min_features: int = 8
     reference_features: int = 1000
     register_references: bool = False
-    reverse_shortlist: int = 10
+    reverse_shortlist: int = 0
     reverse_ratio: float = 0.8
 
     def __post_init__(self):
