@@ -10,6 +10,7 @@ import contextlib
 import json
 import os
 import tempfile
+import zipfile
 from pathlib import Path
 from typing import Any, Iterable, Iterator, TypeVar
 
@@ -171,9 +172,15 @@ def save_npz(path: str | os.PathLike, **arrays: Any) -> None:
         if arr.dtype == object:
             raise ValueError(f"array `{key}` has dtype object, which .npz cannot store without pickle")
         clean[key] = arr
+    # np.savez stamps each member with the current time; fixed stamps make equal arrays give equal bytes, so DVC
+    # sees an unchanged output as unchanged and a fresh clone's run reproduces dvc.lock exactly.
     with atomic_path(path) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, **clean)
+        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+            for key in sorted(clean):
+                info = zipfile.ZipInfo(f"{key}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+                info.compress_type = zipfile.ZIP_DEFLATED
+                with zf.open(info, "w", force_zip64=True) as member:
+                    np.lib.format.write_array(member, clean[key], allow_pickle=False)
 
 
 def load_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
