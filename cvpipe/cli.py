@@ -167,6 +167,10 @@ def main(argv: list[str] | None = None) -> int:
             raise
         if debug and not _interrupted(exc):
             raise
+        if isinstance(exc, BrokenPipeError):  # the reader of stdout went away (``| head``): nothing left to say
+            with contextlib.suppress(OSError):
+                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return 141
         message, file, code = _classify(exc)
         return _fail(message, file, code, json_mode)
 
