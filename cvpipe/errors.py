@@ -44,3 +44,46 @@ class EstimationError(CvpipeError, RuntimeError):
 
 class BudgetError(InputError):
     """A buffer the input and parameters ask for exceeds the memory budget; the message names what to change."""
+
+
+#: default memory budget of one command, in GB (10^9 bytes); ``CVPIPE_MEMORY_BUDGET_GB`` overrides it
+DEFAULT_MEMORY_BUDGET_GB = 4.0
+
+
+def memory_budget() -> int:
+    """The memory budget in bytes: ``$CVPIPE_MEMORY_BUDGET_GB`` (a positive number of GB) or 4 GB.
+
+    Every large buffer (Hough accumulator, stereo cost volumes, keypoint sets, panorama canvases) is checked against
+    it before it is allocated; over it, the command refuses with one line naming what to change.
+    """
+    import math
+    import os
+
+    raw = os.environ.get("CVPIPE_MEMORY_BUDGET_GB", "").strip()
+    if not raw:
+        return int(DEFAULT_MEMORY_BUDGET_GB * 1e9)
+    try:
+        gb = float(raw)
+    except ValueError:
+        gb = float("nan")
+    if not (math.isfinite(gb) and gb > 0):
+        raise InputError(f"CVPIPE_MEMORY_BUDGET_GB must be a positive number of GB, got {raw!r}")
+    return int(gb * 1e9)
+
+
+def check_memory(nbytes: float, what: str, change: str) -> None:
+    """Raise :class:`BudgetError` when a buffer of ``nbytes`` would exceed :func:`memory_budget`.
+
+    Parameters
+    ----------
+    nbytes : float
+        Size of the buffer (or buffers) about to be allocated.
+    what : str
+        What the buffer is, e.g. ``"the Hough accumulator (36000000 angles x 2 distances)"``.
+    change : str
+        What to change, naming the parameter, e.g. ``"raise `--theta-deg` or `--rho`"``.
+    """
+    budget = memory_budget()
+    if nbytes > budget:
+        raise BudgetError(f"{what} needs {nbytes / 1e9:.3g} GB, over the memory budget of {budget / 1e9:.3g} GB; "
+                          f"{change} (or raise CVPIPE_MEMORY_BUDGET_GB)")
