@@ -7,12 +7,16 @@ Subcommands live in ``cvpipe.commands.<name>`` (see that package's docstring). E
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
+import io
+import json
+import os
 import sys
 from types import ModuleType
 
 from . import __version__
-from .errors import EstimationError
+from .errors import CvpipeError
 
 #: subcommand name -> module under ``cvpipe.commands`` (the order is the order of ``cvpipe --help``)
 COMMANDS = {
@@ -65,20 +69,110 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+def _interrupted(exc: BaseException) -> bool:
+    """True when ``exc`` is, or wraps, a KeyboardInterrupt (numba's parallel kernels re-raise Ctrl-C as SystemError)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        if isinstance(exc, SystemError) and "KeyboardInterrupt" in str(exc):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
+def _classify(exc: BaseException) -> tuple[str, str | None, int]:
+    """(one-line message, file or None, exit status) for an exception that ended a command."""
+    if _interrupted(exc):
+        return "interrupted", None, 130
+    if isinstance(exc, CvpipeError):
+        return str(exc), exc.file, exc.exit_code
+    if isinstance(exc, MemoryError):
+        return ("out of memory: the input is too large for this machine; use smaller images or see the memory "
+                "budget (CVPIPE_MEMORY_BUDGET_GB) in the README"), None, 2
+    if isinstance(exc, OSError):
+        name = exc.filename
+        why = exc.strerror or str(exc)
+        return (f"{name}: {why}" if name else why), (None if name is None else str(name)), 2
+    if isinstance(exc, ValueError):
+        return str(exc), None, 2
     try:
-        return int(args._run(args) or 0)
-    except EstimationError as exc:
-        print(f"cvpipe: error: {exc}", file=sys.stderr)
-        return 1
-    except (ValueError, OSError) as exc:
-        print(f"cvpipe: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
+        import cv2
+
+        if isinstance(exc, cv2.error):
+            msg = str(exc).strip().splitlines()
+            last = msg[-1] if msg else "OpenCV error"
+            if "Insufficient memory" in str(exc) or "Failed to allocate" in str(exc):
+                return ("out of memory inside OpenCV: the input is too large for this machine; use smaller images "
+                        "or see the memory budget (CVPIPE_MEMORY_BUDGET_GB) in the README"), None, 2
+            return f"OpenCV failed: {last.strip()}", None, 1
+    except ImportError:  # pragma: no cover - OpenCV is a dependency
+        pass
+    return f"internal error ({type(exc).__name__}: {exc}); set CVPIPE_DEBUG=1 for the traceback", None, 1
+
+
+def _fail(message: str, file: str | None, code: int, json_mode: bool) -> int:
+    """Print the one stderr line and, in ``--json`` mode, the one JSON record; return the exit status."""
+    line = " ".join(str(message).split()) or "failed"
+    if not line.startswith("interrupted"):
+        print(f"cvpipe: error: {line}", file=sys.stderr)
+    else:
         print("cvpipe: error: interrupted", file=sys.stderr)
-        return 130
+    if json_mode:
+        print(json.dumps({"error": line, "file": file, "exit": code}, sort_keys=True))
+    sys.stdout.flush()
+    return code
+
+
+def _parse(parser: argparse.ArgumentParser, argv: list[str] | None, json_mode: bool):
+    """``parser.parse_args`` with argparse's usage-and-error exit turned into the one-line contract."""
+    buf = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(buf):
+            return parser.parse_args(argv), None
+    except SystemExit as exc:
+        code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+        text = buf.getvalue()
+        if code == 0:  # --help, --version: argparse's own exit
+            sys.stderr.write(text)
+            raise
+        lines = [ln for ln in text.strip().splitlines() if ln.strip()]
+        last = lines[-1] if lines else "bad arguments"
+        prog, sep, msg = last.partition(": error: ")
+        where = prog.split(" ", 1)[1] if sep and " " in prog else ""
+        msg = msg if sep else last
+        hint = f" (see cvpipe {where + ' ' if where else ''}--help)"
+        return None, _fail(f"{where + ': ' if where else ''}{msg}{hint}", None, code, json_mode)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``cvpipe``; every failure is one stderr line (and one JSON record with ``--json``) and an exit status.
+
+    Exit status: 0 success, 1 no result (:class:`~cvpipe.errors.EstimationError`, an unexpected failure), 2 bad
+    input or arguments (:class:`~cvpipe.errors.InputError`, a missing or unreadable file, out of memory), 130
+    interrupted (Ctrl-C, also inside numba's parallel kernels). ``CVPIPE_DEBUG=1`` re-raises for a traceback.
+    """
+    args_list = sys.argv[1:] if argv is None else list(argv)
+    json_mode = "--json" in args_list
+    debug = os.environ.get("CVPIPE_DEBUG", "") not in ("", "0")
+    try:
+        parser = build_parser()
+        args, code = _parse(parser, args_list, json_mode)
+        if args is None:
+            return code
+        return int(args._run(args) or 0)
+    except BaseException as exc:  # noqa: BLE001 - the one place that turns every failure into the contract
+        if isinstance(exc, SystemExit):
+            raise
+        if debug and not _interrupted(exc):
+            raise
+        if isinstance(exc, BrokenPipeError):  # the reader of stdout went away (``| head``): nothing left to say
+            with contextlib.suppress(OSError):
+                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return 141
+        message, file, code = _classify(exc)
+        return _fail(message, file, code, json_mode)
 
 
 if __name__ == "__main__":

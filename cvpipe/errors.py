@@ -3,16 +3,87 @@
 ``InputError`` is bad input (a file, a parameter): the CLI exits with status 2.
 ``EstimationError`` means the algorithm ran but could not produce a result (too few matches, degenerate points):
 the CLI exits with status 1. Both derive from the builtin a caller would naturally catch.
+
+Every error may carry the file it is about (``file``, a path string or None); the CLI puts it in the JSON record
+``{"error", "file", "exit"}`` that ``--json`` prints on failure.
 """
+
+from __future__ import annotations
 
 
 class CvpipeError(Exception):
-    """Base class of every error cvpipe raises on purpose."""
+    """Base class of every error cvpipe raises on purpose.
+
+    Parameters
+    ----------
+    message : str
+        One line saying what is wrong and what to change.
+    file : str or path-like, optional
+        The file the error is about.
+    """
+
+    #: the CLI's exit status for this kind of error
+    exit_code = 1
+
+    def __init__(self, *args, file=None):
+        super().__init__(*args)
+        self.file = None if file is None else str(file)
 
 
 class InputError(CvpipeError, ValueError):
     """An input file or parameter is missing, unreadable or out of range."""
 
+    exit_code = 2
+
 
 class EstimationError(CvpipeError, RuntimeError):
     """The algorithm could not produce a result from valid input; the message says what to tune."""
+
+    exit_code = 1
+
+
+class BudgetError(InputError):
+    """A buffer the input and parameters ask for exceeds the memory budget; the message names what to change."""
+
+
+#: default memory budget of one command, in GB (10^9 bytes); ``CVPIPE_MEMORY_BUDGET_GB`` overrides it
+DEFAULT_MEMORY_BUDGET_GB = 4.0
+
+
+def memory_budget() -> int:
+    """The memory budget in bytes: ``$CVPIPE_MEMORY_BUDGET_GB`` (a positive number of GB) or 4 GB.
+
+    Every large buffer (Hough accumulator, stereo cost volumes, keypoint sets, panorama canvases) is checked against
+    it before it is allocated; over it, the command refuses with one line naming what to change.
+    """
+    import math
+    import os
+
+    raw = os.environ.get("CVPIPE_MEMORY_BUDGET_GB", "").strip()
+    if not raw:
+        return int(DEFAULT_MEMORY_BUDGET_GB * 1e9)
+    try:
+        gb = float(raw)
+    except ValueError:
+        gb = float("nan")
+    if not (math.isfinite(gb) and gb > 0):
+        raise InputError(f"CVPIPE_MEMORY_BUDGET_GB must be a positive number of GB, got {raw!r}")
+    return int(gb * 1e9)
+
+
+def check_memory(nbytes: float, what: str, change: str) -> None:
+    """Raise :class:`BudgetError` when a buffer of ``nbytes`` would exceed :func:`memory_budget`.
+
+    Parameters
+    ----------
+    nbytes : float
+        Size of the buffer (or buffers) about to be allocated.
+    what : str
+        What the buffer is, e.g. ``"the Hough accumulator (36000000 angles x 2 distances)"``.
+    change : str
+        What to change, naming the parameter, e.g. ``"raise `--theta-deg` or `--rho`"``.
+    """
+    budget = memory_budget()
+    if nbytes > budget:
+        raise BudgetError(f"{what} needs {nbytes / 1e9:.3g} GB, over the memory budget of {budget / 1e9:.3g} GB; "
+                          f"{change} (or raise CVPIPE_MEMORY_BUDGET_GB)")

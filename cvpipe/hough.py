@@ -36,7 +36,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from .errors import InputError
+from .errors import InputError, check_memory
 
 __all__ = [
     "HoughGrid",
@@ -162,6 +162,13 @@ def hough_grid(
             raise InputError(f"`{name}` must be a finite number, got {value!r}")
     if not 0.0 <= min_theta <= max_theta <= np.pi:
         raise InputError(f"need 0 <= `min_theta` <= `max_theta` <= pi, got min_theta={min_theta}, max_theta={max_theta}")
+    # the accumulator is (angles + 2) x (distances + 2) int32, plus two float32 tables per angle: bounded before
+    # anything is allocated (a tiny step would otherwise grow it to tens of GB)
+    numangle = math.floor((max_theta - min_theta) / float(np.float32(theta))) + 1
+    numrho = round((2 * (int(shape[0]) + int(shape[1])) + 1) / float(np.float32(rho)))
+    check_memory((numangle + 2.0) * (numrho + 2.0) * 4 + numangle * 8.0,
+                 f"the Hough accumulator ({numangle} angles x {numrho} distances)",
+                 "raise the angle step `theta` (`--theta-deg`) or the distance step `rho` (`--rho`)")
     return _grid(int(shape[0]), int(shape[1]), float(rho), float(theta), float(min_theta), float(max_theta))
 
 

@@ -7,9 +7,11 @@ destination folder and renames it, so an interrupted run never leaves a half-wri
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import os
-import tempfile
+import re
+import secrets
 import zipfile
 from pathlib import Path
 from typing import Any, Iterable, Iterator, TypeVar
@@ -53,6 +55,22 @@ def _looks_truncated(data: bytes) -> bool:
     return False
 
 
+def _about_file(fn):
+    """Attach the path argument to the InputError that ``fn`` raises (the CLI's JSON record names it)."""
+
+    @functools.wraps(fn)
+    def wrapper(path, *args, **kwargs):
+        try:
+            return fn(path, *args, **kwargs)
+        except InputError as exc:
+            if exc.file is None:
+                exc.file = str(path)
+            raise
+
+    return wrapper
+
+
+@_about_file
 def read_image(path: str | os.PathLike, mode: str = "color", max_pixels: int = DEFAULT_MAX_PIXELS) -> np.ndarray:
     """Read an image file with checks that name the file and say what was expected.
 
@@ -137,29 +155,162 @@ def list_images(folder: str | os.PathLike) -> list[Path]:
     return sorted(p for p in d.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
 
 
+#: marker in the names of our temporary files: ``.<name>.cvpipe-tmp-<pid>-<random><suffix>`` beside the output
+TMP_MARKER = ".cvpipe-tmp-"
+_TMP_RE = re.compile(r"^\..+\.cvpipe-tmp-(\d+)-[0-9a-f]{8}(\.[^.]*)?$")
+#: folders whose stale temporaries this process has already removed
+_SWEPT: set[Path] = set()
+
+
+def _pid_alive(pid: int) -> bool:
+    """True when a process with this id exists on this machine (or we may not signal it)."""
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # it exists, under another user
+        return True
+    except OverflowError:
+        return False
+    return True
+
+
+def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
+    """Delete our temporary files in ``folder`` whose writing process is gone (a run killed mid-write).
+
+    Only names made by :func:`atomic_path` are considered, and only those whose process id is not running, so a
+    concurrent writer's temporary is never touched. Returns the removed paths.
+    """
+    removed = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    for entry in entries:
+        m = _TMP_RE.match(entry.name)
+        if m is None or _pid_alive(int(m.group(1))):
+            continue
+        try:
+            if entry.is_file(follow_symlinks=False):
+                os.unlink(entry.path)
+                removed.append(Path(entry.path))
+        except OSError:
+            pass
+    return removed
+
+
+def check_output_path(path: str | os.PathLike, what: str = "output", suffixes: Iterable[str] | None = None) -> Path:
+    """Refuse an output path that cannot be written, before any work is done.
+
+    Parameters
+    ----------
+    path : path-like
+        The file to be written.
+    what : str
+        How the message names it (e.g. ``"`-o`"``).
+    suffixes : iterable of str, optional
+        Accepted suffixes (lower case, with the dot); ``None`` accepts any.
+
+    Raises
+    ------
+    InputError
+        The path is a folder, its suffix is not accepted, or its folder is a file or not writable.
+    """
+    dest = Path(path)
+    if dest.is_dir():
+        raise InputError(f"{dest}: {what} is a folder, expected a file name", file=str(dest))
+    if suffixes is not None:
+        allowed = tuple(suffixes)
+        if dest.suffix.lower() not in allowed:
+            got = dest.suffix or "no suffix"
+            raise InputError(f"{dest}: {what} must end in one of {', '.join(allowed)}, got {got}", file=str(dest))
+    parent = dest.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise InputError(f"{dest}: cannot create {what}, {parent} is not a folder", file=str(dest))
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise InputError(f"{dest}: cannot write {what}, folder {parent} is not writable", file=str(dest))
+    return dest
+
+
+def check_output_folder(path: str | os.PathLike, what: str = "output folder") -> Path:
+    """Refuse an output folder that is a file or cannot be created/written (see :func:`check_output_path`)."""
+    d = Path(path)
+    if d.exists() and not d.is_dir():
+        raise InputError(f"{d}: {what} is a file, expected a folder", file=str(d))
+    check_output_path(d / "x", what)
+    return d
+
+
+#: suffixes that :func:`save_image` can encode
+IMAGE_WRITE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm")
+
+
+def safe_name(name: Any, what: str = "name") -> str:
+    """``name`` when it can be used as one file name inside an output folder, else a one-line InputError.
+
+    Names read from data or truth files become file names; one with a separator, ``..``, an absolute path, a NUL
+    or nothing at all could write outside the output folder or nowhere, so it is refused.
+    """
+    if not isinstance(name, str) or not name or name in (".", ".."):
+        raise InputError(f"{what} {name!r} is not a usable file name (empty, '.' or '..')")
+    if "/" in name or "\\" in name or "\0" in name or (os.altsep and os.altsep in name) or os.path.isabs(name):
+        raise InputError(f"{what} {name!r} is not a plain file name (it contains a path separator or NUL); "
+                         "names from data files may not be paths")
+    return name
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; on success rename it to ``path``, on failure delete it."""
+    """Yield a temporary path beside ``path``; on success rename it to ``path``, on any failure delete it.
+
+    The temporary is ``.<name>.cvpipe-tmp-<pid>-<random><suffix>``, created with mode ``0o666`` less the umask (so
+    the output honours the umask, unlike :func:`tempfile.mkstemp`'s 0600). It is removed on every exception,
+    KeyboardInterrupt included; one left by a killed process is removed by the next write into the same folder.
+    """
     dest = Path(path)
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{dest.stem}.", suffix=f".tmp{dest.suffix}", dir=dest.parent)
-    os.close(fd)
-    tmp_path = Path(tmp)
+    if dest.is_dir():
+        raise InputError(f"{dest}: is a folder, expected a file name to write", file=str(dest))
+    try:
+        dest.parent.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        raise InputError(f"{dest}: cannot create the folder {dest.parent} (a file is in the way)",
+                         file=str(dest)) from None
+    parent = dest.parent.resolve()
+    if parent not in _SWEPT:
+        remove_stale_temporaries(parent)
+        _SWEPT.add(parent)
+    while True:
+        tmp_path = dest.parent / f".{dest.stem}{TMP_MARKER}{os.getpid()}-{secrets.token_hex(4)}{dest.suffix}"
+        try:
+            fd = os.open(tmp_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        except FileExistsError:
+            continue
+        os.close(fd)
+        break
     try:
         yield tmp_path
         os.replace(tmp_path, dest)
     finally:
-        if tmp_path.exists():
-            tmp_path.unlink()
+        with contextlib.suppress(OSError):
+            if tmp_path.exists():
+                tmp_path.unlink()
 
 
 def save_image(path: str | os.PathLike, img: np.ndarray, jpeg_quality: int = 95) -> None:
     """Write an image atomically; the format follows the suffix (PNG keeps 16-bit)."""
     dest = Path(path)
     params = [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)] if dest.suffix.lower() in (".jpg", ".jpeg") else []
-    ok, buf = cv2.imencode(dest.suffix, img, params)
+    check_output_path(dest, "image output", IMAGE_WRITE_SUFFIXES)
+    try:
+        ok, buf = cv2.imencode(dest.suffix, img, params)
+    except cv2.error:
+        ok = False
     if not ok:
-        raise InputError(f"{dest}: could not encode the image as {dest.suffix}")
+        raise InputError(f"{dest}: could not encode the image as {dest.suffix}", file=str(dest))
     with atomic_path(dest) as tmp:
         tmp.write_bytes(buf.tobytes())
 
@@ -183,6 +334,7 @@ def save_npz(path: str | os.PathLike, **arrays: Any) -> None:
                     np.lib.format.write_array(member, clean[key], allow_pickle=False)
 
 
+@_about_file
 def load_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
     """Read every array of an ``.npz`` written by :func:`save_npz` (``allow_pickle=False``)."""
     p = Path(path)
@@ -223,6 +375,7 @@ def save_json(path: str | os.PathLike, obj: Any) -> None:
         tmp.write_text(text, encoding="utf-8")
 
 
+@_about_file
 def load_json(path: str | os.PathLike) -> Any:
     """Read a JSON file, naming the file when it is missing or malformed."""
     p = Path(path)

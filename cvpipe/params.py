@@ -597,7 +597,8 @@ class StereoSgmParams:
     fill: bool = False
 
     def __post_init__(self):
-        _in_range("paths", self.paths, 4, 8)
+        if self.paths not in (4, 8) or isinstance(self.paths, bool):  # the kernels aggregate 4 or 8 directions only
+            raise ValueError(f"`paths` must be one of [4, 8], got {self.paths}")
         _in_range("p1", self.p1, 1, 4095)
         _in_range("p2", self.p2, self.p1 + 1, 4096)
         _in_range("ad_weight", self.ad_weight, 0.0)

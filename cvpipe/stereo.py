@@ -21,6 +21,7 @@ import numpy as np
 from numba import njit, prange
 
 from . import metrics
+from .errors import check_memory
 
 #: most bits a census signature can hold (uint64)
 _CENSUS_BITS = 64
@@ -551,6 +552,11 @@ def disparity_sgm(
     if not speckle_range >= 0:
         raise ValueError(f"`speckle_range` must be >= 0, got {speckle_range}")
 
+    h, w = left.shape[:2]
+    # cost (uint8) + the two aggregated volumes (uint16) per pixel and disparity, and ~40 bytes per pixel of
+    # disparity maps and speckle buffers: checked before anything is allocated
+    check_memory(float(h) * w * (5 * int(max_disp) + 40), f"semi-global matching of {w}x{h} pixels x {max_disp} "
+                 "disparities", "lower `--max-disp` or downscale both images (disparities scale with the image)")
     gl, gr = _gray(left), _gray(right)
     planes_l = np.ascontiguousarray(left).reshape(left.shape[0], left.shape[1], -1)  # (H, W, C) views, no copy
     planes_r = np.ascontiguousarray(right).reshape(right.shape[0], right.shape[1], -1)
@@ -706,6 +712,12 @@ def disparity_opencv_sgbm(left: np.ndarray, right: np.ndarray, max_disp: int, *,
     if block_size % 2 == 0 or not 1 <= block_size <= 11:
         raise ValueError(f"`block_size` must be odd and in [1, 11], got {block_size}")
     cn = 1 if left.ndim == 2 else 3
+    h, w = left.shape[:2]
+    nd = _opencv_num_disp(max_disp, w)
+    # the full-image modes keep an (H, W, D) int16 cost and path sum; the others a few rows of it
+    per = float(h) * w * nd * 4 if mode in ("hh", "hh4") else float(w) * nd * 2 * 16 + float(h) * w * 8
+    check_memory(per, f"OpenCV SGBM ({mode}) on {w}x{h} pixels x {nd} disparities",
+                 "lower `--max-disp` or downscale both images")
     sgbm = cv2.StereoSGBM_create(
         minDisparity=0, numDisparities=_opencv_num_disp(max_disp, left.shape[1]), blockSize=int(block_size),
         P1=8 * cn * block_size**2, P2=32 * cn * block_size**2, disp12MaxDiff=int(lr_max_diff),

@@ -11,7 +11,7 @@ import numpy as np
 from tqdm import tqdm
 
 from .. import defects, io
-from ..errors import CvpipeError, EstimationError
+from ..errors import CvpipeError, EstimationError, InputError
 from ..features import DETECTORS, detect
 
 HELP = "judge probe images faulty or perfect against a golden reference and outline the defects"
@@ -23,7 +23,8 @@ _DEFAULTS = defects.InspectParams()
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("reference", help="golden reference image")
     parser.add_argument("probes", nargs="+", metavar="PROBE", help="probe images of the same part")
-    parser.add_argument("--out", help="folder for overlays (<probe>_regions.png, <probe>_diff.png)")
+    parser.add_argument("--out", help="folder for overlays (<probe>_regions.png, <probe>_diff.png; <folder>_<probe> when two probes share a "
+                        "file name)")
     parser.add_argument("--detector", choices=sorted(DETECTORS), default=_DEFAULTS.features.detector,
                         help=f"keypoints for the coarse registration (default {_DEFAULTS.features.detector})")
     parser.add_argument("--threshold", type=float, default=_DEFAULTS.regions.threshold,
@@ -56,27 +57,68 @@ def result_dict(probe: str, r: defects.Inspection) -> dict:
             "regions": np.round(r.probe_regions, 2).tolist(), "H": r.registration.H.tolist()}
 
 
+def overlay_stems(probes: list[str]) -> list[str]:
+    """One distinct file stem per probe: its own stem, or ``<folder>_<stem>`` (then ``_2``, ...) on a clash.
+
+    Probes with equal file names from different folders (``a/p.png``, ``b/p.png``) must not overwrite each
+    other's pictures.
+    """
+    stems = [Path(p).stem for p in probes]
+    clash = {s for s in stems if stems.count(s) > 1}
+    out, used = [], set()
+    for path, stem in zip(probes, stems):
+        name = stem
+        if stem in clash:
+            parent = Path(path).resolve().parent.name or "root"
+            name = f"{parent}_{stem}"
+        base, k = name, 2
+        while name in used:
+            name = f"{base}_{k}"
+            k += 1
+        used.add(name)
+        out.append(name)
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
     params = params_from_args(args)
+    if args.out:
+        io.check_output_folder(args.out, "`--out`")
     reference = io.read_image(args.reference, "color")
     ref_gray = io.to_gray(reference)
+    if int(ref_gray.max()) == int(ref_gray.min()):
+        raise InputError(f"{args.reference}: the reference is blank (one grey level {int(ref_gray.min())}); "
+                         "nothing to register probes to", file=args.reference)
     ref_feats = detect(ref_gray, params.features.detector, params.features.max_features)
-    results, failed = [], 0
-    for path in tqdm(args.probes, desc="inspect", disable=None):
+    stems = overlay_stems(args.probes)
+    results, errors = [], []
+    for path, stem in zip(tqdm(args.probes, desc="inspect", disable=None), stems):
         try:
             probe = io.read_image(path, "color")
             r = defects.inspect(ref_gray, io.to_gray(probe), params, reference_features=ref_feats)
         except CvpipeError as exc:
-            failed += 1
-            print(f"cvpipe: error: {path}: {exc}", file=sys.stderr)
-            results.append({"probe": path, "verdict": None, "score": None, "regions": [], "H": None,
-                            "error": str(exc)})
+            if exc.file is None:
+                exc.file = str(path)
+            errors.append(exc)
+            msg = str(exc) if str(path) in str(exc) else f"{path}: {exc}"
+            results.append({"probe": path, "verdict": None, "score": None, "regions": [], "H": None, "error": msg})
             continue
         results.append(result_dict(path, r))
         if args.out:
-            stem = Path(path).stem
             io.save_image(Path(args.out) / f"{stem}_regions.png", defects.draw_regions(probe, r.probe_regions))
             io.save_image(Path(args.out) / f"{stem}_diff.png", defects.heat_map(r.difference.diff, r.threshold))
+    code = max((e.exit_code for e in errors), default=0)
+    if len(errors) == len(results):
+        # nothing to report: the failure itself is the one line (and the one JSON record)
+        if len(errors) == 1:
+            raise errors[0]
+        exc = (InputError if code == 2 else EstimationError)(
+            f"none of the {len(errors)} probes could be inspected against {args.reference}; first: "
+            f"{results[0]['error']}", file=errors[0].file)
+        raise exc
+    for res in results:
+        if "error" in res:
+            print(f"cvpipe: error: {res['error']}", file=sys.stderr)
     if args.out:
         io.save_json(Path(args.out) / "inspect.json", results)
     if args.json:
@@ -85,6 +127,4 @@ def run(args: argparse.Namespace) -> int:
         for res in results:
             if "error" not in res:
                 print(f"{res['probe']}: {res['verdict']} (score {res['score']:.1f}, {len(res['regions'])} regions)")
-    if failed == len(results):
-        raise EstimationError(f"no probe could be registered to {args.reference}")
-    return 1 if failed else 0
+    return code

@@ -5,10 +5,10 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
+import cv2
 import numpy as np
 
 from .. import io, stereo
-from ..errors import InputError
 from ..params import StereoBmParams, StereoSgbmParams, StereoSgmParams
 
 HELP = "disparity map of a rectified stereo pair (float32 .npy of the LEFT image, NaN = invalid)"
@@ -34,16 +34,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _read(path: str) -> np.ndarray:
-    """Gray stays gray and colour becomes BGR, so that a gray/colour mix is refused by the library."""
+    """Gray stays gray and colour becomes BGR, so that a gray/colour mix is refused by the library.
+
+    16-bit (and float) images are scaled to 8 bits as :func:`cvpipe.io.read_image` does for the other commands.
+    """
     img = io.read_image(path, mode="unchanged")
     if img.dtype != np.uint8:
-        raise InputError(f"{path}: expected an 8-bit image, got {img.dtype}")
+        img = cv2.convertScaleAbs(img, alpha=255.0 / float(np.iinfo(img.dtype).max)) if img.dtype.kind in "ui" \
+            else cv2.convertScaleAbs(np.nan_to_num(img), alpha=255.0)
     return img if img.ndim == 2 else io.to_bgr(img)
 
 
 def run(args: argparse.Namespace) -> int:
-    if not args.out.endswith(".npy"):
-        raise InputError(f"`--out` must end in .npy, got {args.out}")
+    io.check_output_path(args.out, "`-o`", (".npy",))
     left, right = _read(args.left), _read(args.right)
     method, params_cls = CLI_METHODS[args.method]
     options = dataclasses.asdict(params_cls())

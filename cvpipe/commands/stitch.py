@@ -39,6 +39,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..panorama import stitch
 
+    # before any work: a panorama that cannot be written must not cost the stitching first
+    io.check_output_path(args.out, "`-o`", io.IMAGE_WRITE_SUFFIXES)
     images, positions, dropped = [], [], []
     for k, path in enumerate(args.images):
         try:
