@@ -1435,6 +1435,9 @@ def report_summary(compared: dict, pictures: list, dropped: list[dict]) -> dict:
         truth_note = (f"{compared['truth_pairs']} of {compared['pairs']} pairs have a true homography: corner error is "
                       "the mean distance of A's four corners mapped by the estimated and the true H, and a pair "
                       f"succeeds within {px:g} px.")
+        without = [n for n, row in compared["per_pair"].items() if not row["truth"]]
+        if without:
+            truth_note += f" Without ground truth (inliers only): {', '.join(without)}."
     else:
         truth_note = ("These pairs have no ground truth: the tables compare the methods by inliers (matches within "
                       "the threshold) and the pictures show each method's alignment.")

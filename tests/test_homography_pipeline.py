@@ -200,6 +200,8 @@ def test_stages_end_to_end_with_and_without_truth(tmp_path, pair_files):
     not_processed = next(t for t in summary["tables"] if t["title"] == "Not processed")
     assert {r[0] for r in not_processed["rows"]} == {"alone_a.png", "broken"}
     assert {r["pair"] for r in io.load_json(tmp_path / "plots" / "corner_error.json")} == {"p"}
+    assert "1 of 2 pairs have a true homography" in summary["description"]
+    assert "Without ground truth (inliers only): sub." in summary["description"]
 
     (images / "truth.json").unlink()
     metrics, summary = report()
