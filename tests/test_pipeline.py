@@ -27,7 +27,7 @@ def test_fresh_clone_repro_runs_every_stage(reproduced):
     assert {"samples", "homography_features", "homography_match", "report"} <= ran(out)
     assert (repo / "data/samples/homography/truth.json").is_file()
     assert (repo / "outputs/report.html").is_file() and (repo / "outputs/plots/timings.json").is_file()
-    assert (repo / "outputs/homography/matches/summary.json").is_file()
+    assert (repo / "outputs/homography/matches/dropped.json").is_file()
 
 
 def test_fresh_clone_run_leaves_git_status_clean(reproduced):
