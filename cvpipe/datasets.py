@@ -336,7 +336,7 @@ def find_panorama(folder: str | os.PathLike) -> tuple[list[PanoramaSet], list[di
             if not isinstance(names, list) or not isinstance(Hs, list) or len(names) != len(Hs):
                 raise InputError(f"{path}: fields `{where}.images` and `{where}.H` must be lists of equal length")
             truth[str(_field(path, r, where, "name"))] = {
-                Path(str(n)).name: _field(path, {"H": h}, f"{where}.H[{k}]", "H", (3, 3))
+                Path(str(n)).name: _field(path, {f"H[{k}]": h}, where, f"H[{k}]", (3, 3))
                 for k, (n, h) in enumerate(zip(names, Hs))
             }
     sets = []

@@ -76,7 +76,7 @@ def _ours(s: PanoramaSet, h: dict | None, blend: dict | None, crop: dict | None)
         row["error"] = "not processed (see the table Not processed)"
         return row
     if h.get("ok"):
-        row.update(used_images=len(h["used"]), dropped_images=len(h["files"]) - len(h["used"]))
+        row.update(used_images=len(h["used"]), dropped_images=len(files) - len(h["used"]))
         if s.H is not None:
             truth = [dict(zip(files, s.H)).get(name) for name in h["files"]]
             err = median_corner_error(h, truth)
@@ -97,7 +97,7 @@ def _opencv(s: PanoramaSet, cv: dict | None) -> dict:
     n = len(s.files)
     if cv is None:
         return {"ok": False, "used_images": 0, "dropped_images": n, "error": "not processed"}
-    row = {"ok": bool(cv["ok"]), "used_images": len(cv["used"]), "dropped_images": len(cv["files"]) - len(cv["used"]),
+    row = {"ok": bool(cv["ok"]), "used_images": len(cv["used"]), "dropped_images": n - len(cv["used"]),
            "status": cv["status"]}
     if cv["ok"]:
         row.update(width=int(cv["size"][0]), height=int(cv["size"][1]), empty_share=cv["empty_share"])
@@ -119,7 +119,8 @@ def compare_sets(sets: Sequence[PanoramaSet], homographies: dict, blends: dict, 
     Returns
     -------
     list of dict
-        Per method: ``ok``, ``used_images``, ``dropped_images`` and, when stitched, ``width``/``height`` (pixels of
+        Per method: ``ok``, ``used_images``, ``dropped_images`` (the set's images not in the panorama, whatever
+        the reason) and, when stitched, ``width``/``height`` (pixels of
         the final panorama: ours cropped, cv2.Stitcher's as returned) and ``empty_share``; ours also
         ``corner_error_px`` (when the set has truth for two or more used images) and ``ghosting``; a failure's
         ``error``.
@@ -250,8 +251,9 @@ def report_summary(results: Sequence[dict], pictures: list[dict], dropped: Seque
 
 
 def quality_plot(results: Sequence[dict]) -> list[dict]:
-    """``dvc plots`` rows, one per set and method: ``{"label", "set", "method", "used_images", "stitched"}`` plus
-    ``corner_error_px`` where it is known (ours, sets with truth; finite)."""
+    """``dvc plots`` rows, one per set and method: ``{"label", "set", "method", "used_images", "stitched",
+    "corner_error_px"}``; ``corner_error_px`` is null where it is unknown (no truth, cv2.Stitcher, not finite), so
+    that the corner-error plot still finds its field when no set has truth."""
     rows = []
     for r in results:
         for method in METHODS:
@@ -259,7 +261,6 @@ def quality_plot(results: Sequence[dict]) -> list[dict]:
             row = {"label": f"{r['set']} {method}", "set": r["set"], "method": method,
                    "used_images": int(m["used_images"]), "stitched": int(m["ok"])}
             err = m.get("corner_error_px")
-            if err is not None and np.isfinite(err):
-                row["corner_error_px"] = round(float(err), 4)
+            row["corner_error_px"] = round(float(err), 4) if err is not None and np.isfinite(err) else None
             rows.append(row)
     return rows

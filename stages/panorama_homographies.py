@@ -20,7 +20,8 @@ def panorama_homographies(st: Stage) -> None:
         rec = {"files": files, "work_sizes": graph.sizes, "full_sizes": arrays["full_sizes"].tolist()}
         try:
             with st.timer("register"):
-                reg = panorama.register(graph, refine=p.refine, max_points_per_pair=p.max_points_per_pair, rng=seed)
+                reg = panorama.register(graph, refine=p.refine, max_points_per_pair=p.max_points_per_pair, rng=seed,
+                                        ids=files)
         except EstimationError as exc:  # recorded, so the later stages and the report say which set failed and why
             rec.update(ok=False, error=str(exc), failed_in="panorama_homographies")
             st.drop(f.stem, str(exc))
