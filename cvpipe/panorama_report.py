@@ -106,7 +106,8 @@ def _opencv(s: PanoramaSet, cv: dict | None) -> dict:
     return row
 
 
-def compare_sets(sets: Sequence[PanoramaSet], homographies: dict, blends: dict, crops: dict, opencv: dict) -> list[dict]:
+def compare_sets(sets: Sequence[PanoramaSet], homographies: dict, blends: dict, crops: dict,
+                 opencv: dict) -> list[dict]:
     """One result per set: ``{"set", "images", "truth": bool, "ours": {...}, "opencv_stitcher": {...}}``.
 
     Parameters

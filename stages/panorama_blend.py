@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from cvpipe import blending, io, warping
-from cvpipe.errors import EstimationError
+from stages import _panorama as pr
 from stages._runner import Stage, run
 
 
@@ -26,23 +26,14 @@ def _blend(st: Stage, d: Path, meta: dict, out: Path) -> dict:
 
 
 def panorama_blend(st: Stage) -> None:
-    out = Path(st.args.out)
-    made = upstream = 0
+    out, records = Path(st.args.out), []
     for d in st.progress(sorted(x for x in Path(st.args.warp).iterdir() if x.is_dir()), "panorama blend"):
         meta = io.load_json(d / "warp.json")
-        result = {"ok": False, "error": meta.get("error"), "failed_in": meta.get("failed_in")}
-        if not meta["ok"]:
-            upstream += 1
-        else:
-            try:
-                result = _blend(st, d, meta, out)
-                made += 1
-            except EstimationError as exc:
-                result = {"ok": False, "error": str(exc), "failed_in": "panorama_blend"}
-                st.drop(d.name, str(exc))
-        io.save_json(out / f"{d.name}.json", result)
+        rec = pr.step_record(meta, "panorama_blend", d.name, lambda: _blend(st, d, meta, out), st.drop)
+        io.save_json(out / f"{d.name}.json", rec)
+        records.append(rec)
     out.mkdir(parents=True, exist_ok=True)
-    st.made(f"{made} panoramas blended into {out}" + (f" ({upstream} sets failed earlier)" if upstream else ""))
+    st.made(pr.step_summary(records, "panorama_blend", f"panoramas blended into {out}"))
 
 
 if __name__ == "__main__":

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from cvpipe import io, panorama, warping
-from cvpipe.errors import EstimationError
+from stages import _panorama as pr
 from stages._runner import Stage, run
 
 
@@ -26,23 +26,15 @@ def _warp(st: Stage, h: dict, folder: Path, out: Path) -> dict:
 
 
 def panorama_warp(st: Stage) -> None:
-    out = Path(st.args.out)
-    made = upstream = 0
+    out, records = Path(st.args.out), []
     for f in st.progress(sorted(Path(st.args.homographies).glob("*.json")), "panorama warp"):
         h = io.load_json(f)
-        meta = {"ok": False, "error": h.get("error"), "failed_in": h.get("failed_in")}
-        if not h["ok"]:
-            upstream += 1
-        else:
-            try:
-                meta = _warp(st, h, Path(st.args.images) / f.stem, out / f.stem)
-                made += 1
-            except EstimationError as exc:
-                meta = {"ok": False, "error": str(exc), "failed_in": "panorama_warp"}
-                st.drop(f.stem, str(exc))
-        io.save_json(out / f.stem / "warp.json", meta)
+        rec = pr.step_record(h, "panorama_warp", f.stem,
+                             lambda: _warp(st, h, Path(st.args.images) / f.stem, out / f.stem), st.drop)
+        io.save_json(out / f.stem / "warp.json", rec)
+        records.append(rec)
     out.mkdir(parents=True, exist_ok=True)
-    st.made(f"{made} sets warped into {out}" + (f" ({upstream} failed in an earlier stage)" if upstream else ""))
+    st.made(pr.step_summary(records, "panorama_warp", f"sets warped into {out}"))
 
 
 if __name__ == "__main__":
