@@ -4,6 +4,8 @@ its features. Layout: every subfolder is one set, its images in any order (truth
 
 from pathlib import Path
 
+import numpy as np
+
 from cvpipe import datasets, io, panorama
 from cvpipe.errors import InputError
 from stages._runner import Stage, run
@@ -12,7 +14,7 @@ from stages._runner import Stage, run
 MIN_SIDE = 16
 
 
-def _readable(st: Stage, s: datasets.PanoramaSet) -> list[tuple[Path, object]]:
+def _readable(st: Stage, s: datasets.PanoramaSet) -> list[tuple[Path, np.ndarray]]:
     """The set's images that can be read and are large enough (the others are dropped with their reason)."""
     got, stems = [], {}
     for f in s.files:
