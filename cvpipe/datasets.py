@@ -313,11 +313,16 @@ def find_stereo(folder: str | os.PathLike) -> tuple[list[StereoPair], list[dict]
 class PanoramaSet:
     name: str
     files: list[Path]
-    H: list[np.ndarray] | None = None  # per image (in `files` order): image -> first image pixels
+    H: list[np.ndarray | None] | None = None  # per image (`files` order): image -> truth's first image pixels
 
 
 def find_panorama(folder: str | os.PathLike) -> tuple[list[PanoramaSet], list[dict]]:
-    """Every subfolder of ``folder`` is one set; a set needs at least two images."""
+    """Every subfolder of ``folder`` is one set; a set needs at least two images.
+
+    ``truth.json`` (optional) lists ``sets[]`` with ``name``, ``images`` (file names, also ``<set>/<file>``) and
+    ``H`` (per image, image -> first listed image pixels). A set the truth names gets ``H`` with ``None`` for its
+    images the truth does not list (e.g. a distractor); a set it does not name gets ``H = None``.
+    """
     d = _folder(folder, "panorama")
     dropped: list[dict] = []
     truth: dict[str, dict[str, np.ndarray]] = {}
@@ -331,7 +336,8 @@ def find_panorama(folder: str | os.PathLike) -> tuple[list[PanoramaSet], list[di
             if not isinstance(names, list) or not isinstance(Hs, list) or len(names) != len(Hs):
                 raise InputError(f"{path}: fields `{where}.images` and `{where}.H` must be lists of equal length")
             truth[str(_field(path, r, where, "name"))] = {
-                str(n): _field(path, {"H": h}, f"{where}.H[{k}]", "H", (3, 3)) for k, (n, h) in enumerate(zip(names, Hs))
+                Path(str(n)).name: _field(path, {f"H[{k}]": h}, where, f"H[{k}]", (3, 3))
+                for k, (n, h) in enumerate(zip(names, Hs))
             }
     sets = []
     for sub in sorted(p for p in d.iterdir() if p.is_dir() and not p.name.startswith(".")):
@@ -340,7 +346,7 @@ def find_panorama(folder: str | os.PathLike) -> tuple[list[PanoramaSet], list[di
             _drop(dropped, sub.name, f"a panorama set needs at least 2 images, found {len(files)}")
             continue
         t = truth.get(sub.name)
-        H = [t[f.name] for f in files] if t and all(f.name in t for f in files) else None
+        H = [t.get(f.name) for f in files] if t else None
         sets.append(PanoramaSet(sub.name, files, H))
     for f in images_in(d):
         _drop(dropped, f.name, "images must be in one subfolder per panorama set")
