@@ -82,13 +82,42 @@ def test_inserted_defect_is_found_where_it_was_put(reference):
     assert r.score > 0
 
 
-def test_pipeline_registration_is_the_one_inspect_uses(reference):
+def test_the_steps_one_by_one_give_what_inspect_gives(reference):
+    """The DVC stages run register -> warp -> difference -> regions (and the direct alternative -> choose) one by
+    one, storing arrays between them; the chain must give inspect()'s verdict, score, regions and H exactly."""
     part = reference.copy()
     cv2.circle(part, (90, 90), 7, (230, 230, 230), -1, cv2.LINE_AA)
-    probe = make_probe(part, motion(-2.0, 1.02, (4.0, 7.0)), seed=9)
-    r = defects.inspect(reference, probe)
-    reg = defects.register_for_inspection(reference, probe)
-    assert reg.method == r.registration.method and np.array_equal(reg.H, r.registration.H)
+    for probe in (make_probe(part, motion(-2.0, 1.02, (4.0, 7.0)), seed=9),
+                  make_probe(reference, motion(1.0, 0.98, (-6.0, 3.0)), seed=10)):
+        r = defects.inspect(reference, probe)
+        ref, prb = io.to_gray(reference), io.to_gray(probe)
+        reg = defects.register(ref, prb)
+        found = []
+        for g in [reg] + ([defects.register_direct(ref, prb, matches=reg.matches, inliers=reg.inliers)]
+                          if defects.wants_alternative(reg) else []):
+            d = defects.difference(ref, *defects.warp_probe(prb, g.H, ref.shape))
+            d = defects.Difference.from_arrays(d.to_arrays("alt_"), "alt_")  # as stored between the stages
+            found.append(defects.find_regions(d, g.H, prb.shape))
+        chosen = defects.choose(found[0], found[1] if len(found) > 1 else None)
+        assert (chosen.verdict, chosen.score) == (r.verdict, r.score)
+        assert np.array_equal(chosen.probe_regions, r.probe_regions)
+        H = reg.H if chosen is found[0] else defects.register_direct(ref, prb).H
+        assert np.array_equal(H, r.registration.H)
+
+
+def test_choose_keeps_the_first_unless_a_faulty_one_has_a_lower_scoring_alternative():
+    def result(verdict, score):
+        return defects.Inspection(verdict, score, np.zeros((0, 4)), np.zeros((0, 4)), np.zeros(0), 10.0)
+
+    faulty, lower, higher = result("faulty", 50.0), result("faulty", 20.0), result("faulty", 80.0)
+    perfect = result("perfect", 0.0)
+    assert defects.choose(faulty, lower) is lower and defects.choose(faulty, perfect) is perfect
+    assert defects.choose(faulty, higher) is faulty and defects.choose(faulty, None) is faulty
+    assert defects.choose(perfect, result("perfect", 0.0)) is perfect  # a perfect probe never asks
+    reg = defects.Registration(np.eye(3), np.eye(3), 50, 40, 0.99, "features")
+    assert defects.wants_alternative(reg)
+    assert not defects.wants_alternative(reg, DefectRegisterParams(direct_fallback=False))
+    assert not defects.wants_alternative(replace(reg, method="direct"))
 
 
 @pytest.mark.parametrize("seed, rot, shift, gain, bias", [
