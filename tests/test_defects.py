@@ -342,3 +342,102 @@ def test_deeppcb_pair_warped_both_ways(data_root):
     assert counts.tp >= 0.8 * len(boxes) and counts.fp <= 2
     perfect, _, _ = deeppcb_probe(ref, np.zeros((0, 4)), rng)
     assert defects.inspect(ref, perfect, params).verdict == "perfect"
+
+
+# --------------------------------------------------------------------------------------------- DVC stages
+
+
+def _run_stages(root, folder, out, params):
+    """The defect stages of dvc.yaml, in order, on ``folder`` (cwd ``out``: the runner's timings land there)."""
+    import os
+    import subprocess
+    import sys
+
+    from pathlib import Path
+
+    o = Path("outputs", "defect")  # relative, as in dvc.yaml: the summary's picture paths must be
+    steps = [
+        ["stages.features", "--images", folder, "--out", o / "features", "--section", "defect.features"],
+        ["stages.defect_match", "--images", folder, "--features", o / "features", "--out", o / "matches"],
+        ["stages.defect_register", "--images", folder, "--features", o / "features", "--matches", o / "matches",
+         "--out", o / "register"],
+        ["stages.defect_diff", "--images", folder, "--registered", o / "register", "--out", o / "diff"],
+        ["stages.defect_regions", "--diff", o / "diff", "--registration", o / "register" / "registration.json",
+         "--out", o / "results.json"],
+        ["stages.defect_report", "--images", folder, "--results", o / "results.json", "--registration",
+         o / "register" / "registration.json", "--diff", o / "diff", "--out", o],
+    ]
+    env = dict(os.environ, PYTHONPATH=str(root))
+    for module, *args in steps:
+        subprocess.run([sys.executable, "-m", module, *map(str, args), "--params", str(params)], cwd=out, env=env,
+                       check=True, capture_output=True, text=True)
+    return out / o
+
+
+@pytest.mark.slow
+def test_stages_give_inspect_results_drop_the_unregistrable_probe_and_rerun_identically(reference, tmp_path):
+    from pathlib import Path
+
+    from cvpipe.report import validate_summary
+
+    root = Path(__file__).resolve().parents[1]
+    folder = tmp_path / "mine"
+    part = reference.copy()
+    cv2.ellipse(part, (200, 120), (9, 6), 30, 0, 360, (25, 25, 35), -1, cv2.LINE_AA)
+    H_faulty, H_perfect = motion(2.5, 1.03, (6.0, -9.0)), motion(-1.5, 0.98, (-5.0, 4.0))
+    probes = {"faulty.png": make_probe(part, H_faulty, seed=1), "perfect.png": make_probe(reference, H_perfect, 2),
+              "blank.png": np.full((SIZE, SIZE, 3), 90, np.uint8)}
+    io.save_image(folder / "reference.png", reference)
+    for name, img in probes.items():
+        io.save_image(folder / "probes" / name, img)
+    true_box = defects.map_boxes([[190, 111, 210, 129]], H_faulty)
+    io.save_json(folder / "truth.json", {"probes": [
+        {"file": "faulty.png", "verdict": "faulty", "boxes": true_box, "H": H_faulty},
+        {"file": "perfect.png", "verdict": "perfect", "boxes": [], "H": H_perfect}]})  # blank.png: no truth
+    o = _run_stages(root, folder, tmp_path, root / "params.yaml")
+
+    params = defects.load_inspect_params(root / "params.yaml")
+    records = {r["probe"]: r for r in json.loads((o / "results.json").read_text())}
+    for name in ("faulty.png", "perfect.png"):  # the stage chain is inspect(), step by step
+        # read as the stages read them (the decoder's grey conversion can differ from cv2.cvtColor by 1 level)
+        r = defects.inspect(io.read_image(folder / "reference.png", "gray"),
+                            io.read_image(folder / "probes" / name, "gray"), params)
+        rec = records[name]
+        assert (rec["verdict"], rec["score"]) == (r.verdict, r.score)
+        assert np.array_equal(np.reshape(rec["regions"], (-1, 4)), r.probe_regions)
+        assert np.array_equal(rec["H"], r.registration.H)
+    assert records["blank.png"]["verdict"] is None and "blank" in records["blank.png"]["error"]
+
+    summary = validate_summary(json.loads((o / "summary.json").read_text()))
+    not_processed = [t for t in summary["tables"] if t["title"] == "Not processed"]
+    assert [row[0] for row in not_processed[0]["rows"]] == ["blank.png"]
+    assert "2 of 3 probes have ground truth" in summary["description"]
+    metrics = json.loads((o / "metrics.json").read_text())["defect"]
+    leaves = [v for m in metrics.values() for v in m.values()]
+    assert all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in leaves)
+    assert metrics["faulty"]["faulty"] == 1 and metrics["perfect"]["faulty"] == 0
+    assert metrics["blank"] == {"inspected": 0}
+    assert metrics["all"]["accuracy"] == 1.0 and metrics["all"]["truth_probes"] == 2
+    # the found blob is the inserted one (same tolerance as test_inserted_defect_is_found_where_it_was_put)
+    assert metrics["faulty"]["box_iou"] >= 0.4
+    # ECC registration lands well under a pixel over the frame (as in the unit tests)
+    assert metrics["faulty"]["registration_corner_error_px"] < 0.5
+    confusion = json.loads((o / "plots" / "confusion.json").read_text())
+    assert confusion == [{"actual": "faulty", "predicted": "faulty", "probe": "faulty.png"},
+                         {"actual": "perfect", "predicted": "perfect", "probe": "perfect.png"}]
+    assert "timings" not in summary and (tmp_path / "outputs" / "timings" / "defect_register.json").is_file()
+
+    # a rerun reproduces every cached output byte for byte (timings live apart, in outputs/timings)
+    cached = [p for p in sorted(o.rglob("*")) if p.is_file()]
+    before = {p: p.read_bytes() for p in cached}
+    _run_stages(root, folder, tmp_path, root / "params.yaml")
+    assert [p for p in cached if p.read_bytes() != before[p]] == []
+
+    # without a truth file everything still runs; no accuracy anywhere, nothing to plot in the confusion matrix
+    (folder / "truth.json").unlink()
+    o = _run_stages(root, folder, tmp_path, root / "params.yaml")
+    metrics = json.loads((o / "metrics.json").read_text())["defect"]
+    assert "accuracy" not in metrics["all"] and "correct" not in metrics["faulty"]
+    assert json.loads((o / "plots" / "confusion.json").read_text()) == []
+    summary = json.loads((o / "summary.json").read_text())
+    assert "no ground truth" in summary["description"]
