@@ -5,6 +5,8 @@ a small pyramid), warp the probe into the reference frame, fit gain and bias bet
 difference that tolerates the last pixel or so of misregistration (the probe is compared against the min/max of the
 reference over a small disc and vice versa), threshold it with hysteresis, clean it with morphology and turn the
 connected components into regions, in reference and probe pixels. A probe with at least one region is ``faulty``.
+Each step is a function of its own (:func:`register`, :func:`register_direct`, :func:`warp_probe`,
+:func:`difference`, :func:`find_regions`, :func:`choose`): :func:`inspect` runs them all, each DVC stage one.
 
 Every homography here maps reference pixels to probe pixels (x = column, y = row).
 """

@@ -15,11 +15,14 @@ def defect_match(st: Stage) -> None:
     for d in dropped:
         st.drop(d["item"], d["reason"])
     ref = Features.from_arrays(io.load_npz(feats / f"{inputs.reference.stem}.npz"))
+    # why defect_features skipped an image, when it says so
+    skipped = {d["item"]: d["reason"] for d in (io.load_json(feats / "dropped.json")
+                                                if (feats / "dropped.json").is_file() else [])}
     counts = {}
     for probe in st.progress(inputs.probes, "defect match"):
         path = feats / "probes" / f"{probe.name}.npz"
         if not path.is_file():
-            st.drop(probe.path.name, "no keypoints from defect_features (unreadable image?)")
+            st.drop(probe.path.name, skipped.get(f"probes/{probe.path.name}", "no keypoints from defect_features"))
             continue
         with st.timer("match"):
             idx = matching.match(ref.descriptors, Features.from_arrays(io.load_npz(path)).descriptors, p.ratio,

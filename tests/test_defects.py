@@ -272,6 +272,47 @@ def test_evaluate_counts_errors_and_false_alarms():
         defects.evaluate(results, truth + [{"file": "d.png", "verdict": "perfect", "boxes": []}])
 
 
+def test_report_metrics_are_numbers_per_probe_and_score_only_probes_with_truth():
+    from cvpipe import defects_report as rep
+
+    records = [{"probe": "a.png", "verdict": "faulty", "score": 40.0, "regions": [[10, 10, 30, 30]],
+                "H": np.eye(3).tolist(), "method": "features"},
+               {"probe": "b.v2.png", "verdict": "perfect", "score": 0.0, "regions": [], "H": np.eye(3).tolist(),
+                "method": "direct"},
+               {"probe": "c.png", "verdict": None, "score": None, "regions": [], "H": None, "error": "blank"}]
+    shift = np.array([[1, 0, 2.0], [0, 1, 0], [0, 0, 1]])
+    truth = {"a.png": {"verdict": "faulty", "boxes": np.array([[10.0, 10, 30, 30], [50, 50, 60, 60]]), "H": shift},
+             "c.png": {"verdict": "perfect", "boxes": np.zeros((0, 4)), "H": None}}
+    ev = rep.evaluate_records(records, truth, (100, 100))
+    m = rep.metrics_of(records, ev)["defect"]
+    assert set(m) == {"all", "a", "b_v2", "c"}  # stems, no dots: DVC splits metric keys at dots
+    assert all(isinstance(v, (int, float)) and not isinstance(v, bool) for d in m.values() for v in d.values())
+    # a: one of its two true boxes found exactly, the other missed -> mean best IoU 0.5; H off by 2 px everywhere
+    assert m["a"]["correct"] == 1 and m["a"]["box_iou"] == pytest.approx(0.5)
+    assert m["a"]["registration_corner_error_px"] == pytest.approx(2.0)
+    assert "correct" not in m["b_v2"] and m["b_v2"]["faulty"] == 0  # no truth: nothing scored
+    assert m["c"] == {"inspected": 0, "correct": 0}  # not inspected counts as wrong
+    assert m["all"]["accuracy"] == 0.5 and m["all"]["truth_probes"] == 2 and m["all"]["direct_registrations"] == 1
+    assert rep.confusion_rows(records, truth) == [{"probe": "a.png", "actual": "faulty", "predicted": "faulty"},
+                                                  {"probe": "c.png", "actual": "perfect",
+                                                   "predicted": "not inspected"}]
+    assert [r["probe"] for r in rep.score_rows(records)] == ["a.png", "b.v2.png"]
+    no_truth = rep.metrics_of(records, rep.evaluate_records(records, {}, (100, 100)))["defect"]
+    assert "accuracy" not in no_truth["all"] and "correct" not in no_truth["a"]
+
+
+def test_montage_keeps_each_picture_whole_in_its_tile():
+    from cvpipe import defects_report as rep
+
+    wide = np.full((50, 200, 3), 255, np.uint8)
+    out = rep.montage([wide, wide, wide], cols=2, width=400)
+    assert out.shape == (400, 400, 3)  # two rows of two 200 px tiles (the fourth empty)
+    # the 4:1 picture fills its tile's width and a quarter of its height: not stretched
+    assert out[:50, :200].min() == 255 and out[51:200, :200].max() == 0 and out[200:, 200:].max() == 0
+    with pytest.raises(ValueError, match="`images` must hold at least one image"):
+        rep.montage([], 3)
+
+
 # --------------------------------------------------------------------------------------------- command line
 
 
