@@ -143,9 +143,14 @@ def overlay(probe: np.ndarray, record: Mapping[str, Any], truth: Mapping[str, An
     text = f"{PurePath(record['probe']).name}: {record.get('verdict') or NOT_INSPECTED}"
     if truth is not None:
         text += f" (truth {truth['verdict']})"
-    cv2.putText(out, text, (8, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (0, 0, 0), 4, cv2.LINE_AA)
-    cv2.putText(out, text, (8, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (255, 255, 255), 2, cv2.LINE_AA)
-    return out
+    return caption(out, text)
+
+
+def caption(image: np.ndarray, text: str) -> np.ndarray:
+    """``image`` (BGR, drawn on in place and returned) with ``text`` in white on a dark outline, top left."""
+    cv2.putText(image, text, (8, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (0, 0, 0), 4, cv2.LINE_AA)
+    cv2.putText(image, text, (8, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (255, 255, 255), 2, cv2.LINE_AA)
+    return image
 
 
 def montage(images: list[np.ndarray], cols: int, width: int = 1200) -> np.ndarray:

@@ -33,8 +33,8 @@ def defect_report(st: Stage) -> None:
         overlays.append(over)
         if r["verdict"] is not None:
             z = io.load_npz(Path(a.diff) / f"{Path(name).stem}.npz")
-            heats.append(defects.heat_map(z["alt_diff" if r["registration"] == "alternative" else "diff"],
-                                          r["threshold"]))
+            heat = defects.heat_map(z["alt_diff" if r["registration"] == "alternative" else "diff"], r["threshold"])
+            heats.append(rep.caption(heat, f"{name}: score {r['score']:.0f}"))
     pictures = []
     for key, images, caption in (
             ("overlays", overlays, "probes with found regions (red) and true boxes (green)"),
