@@ -1346,7 +1346,8 @@ def report_summary(decisions: dict[str, Sequence[dict]], brands: Sequence[str], 
             f"Every scene's features are matched against the gallery ({len(brands)} brands, {references} reference "
             f"images) in one index; each reference's best homography is verified (RANSAC plus shape checks) and "
             f"scored by its a-contrario significance (-log10 NFA); below {threshold:g} the answer is none. "
-            f"{truth_note} Overlays: found outline in green, true outline in blue, inlier matches in orange. "
+            f"{truth_note} Overlays: found outline in green, {'true outline in blue, ' if labelled else ''}"
+            "inlier matches in orange. "
             "Times: `dvc plots show` (outputs/timings)."),
         "pictures": pictures,
         "tables": tables,

@@ -47,8 +47,9 @@ def logo_report(st: Stage) -> None:
                                    np.array(r["truth_quad"]), caption)
         path = out / f"overlay_{best}_{r['scene']}.png"
         io.save_image(path, pic)
-        pictures.append({"path": path.as_posix(), "caption": f"{caption}; green = found outline, blue = true "
-                         "outline, orange = inliers"})
+        blue = "blue = true outline, " if r["labelled"] else ""
+        pictures.append({"path": path.as_posix(), "caption": f"{caption}; green = found outline, {blue}orange = "
+                         "inlier matches"})
     dropped = logos.merge_dropped({m: io.load_json(Path(a.verify) / m / "dropped.json") for m in a.methods})
     references = sum(len(files) for files in inputs.gallery.values())
     io.save_json(a.summary, logos.report_summary(decisions, brands, references, vp.score_threshold, pictures,
