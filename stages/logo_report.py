@@ -55,7 +55,7 @@ def logo_report(st: Stage) -> None:
     io.save_json(a.summary, logos.report_summary(decisions, brands, references, vp.score_threshold, pictures,
                                                  dropped))
     io.save_json(a.found, logos.found_plot(decisions, brands))
-    st.made(f"{len(a.methods)} detectors compared on {len(decisions[best])} scenes, {len(pictures)} pictures")
+    st.made(f"{len(decisions[best])} scenes, detectors {', '.join(a.methods)}, {len(pictures)} pictures -> {out}")
     for d in dropped:
         st.drop(d["item"], f"{', '.join(d['methods'])}: {d['reason']}")
 
