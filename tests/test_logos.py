@@ -809,3 +809,20 @@ def test_merge_dropped_lists_each_input_once_with_its_detectors():
                                        {"item": "gallery/y.png", "reason": "fewer than 8 keypoints"}]})
     assert got == [{"item": "scenes/x.jpg", "reason": "unreadable", "methods": ["sift", "orb"]},
                    {"item": "gallery/y.png", "reason": "fewer than 8 keypoints", "methods": ["orb"]}]
+
+
+def test_find_logo_maps_files_to_brands_and_drops_name_clashes(tmp_path, marks):
+    from cvpipe import datasets
+
+    (tmp_path / "gallery" / "brand1").mkdir(parents=True)
+    (tmp_path / "scenes").mkdir()
+    for rel in ("gallery/brand0.png", "gallery/brand0.jpg", "gallery/brand1/a.png", "gallery/brand1/b.webp",
+                "scenes/s.jpg"):
+        cv2.imwrite(str(tmp_path / rel), marks["brand0"])
+    (tmp_path / "gallery" / "empty").mkdir()
+    inputs, dropped = datasets.find_logo(tmp_path)
+    assert {b: [f.relative_to(tmp_path).as_posix() for f in fs] for b, fs in inputs.gallery.items()} == {
+        "brand0": ["gallery/brand0.jpg"], "brand1": ["gallery/brand1/a.png", "gallery/brand1/b.webp"]}
+    # brand0.png would write the same features file as brand0.jpg; an empty brand folder is listed too
+    assert [d["item"] for d in dropped] == ["gallery/brand0.png", "gallery/empty"]
+    assert inputs.scenes[0].name == "s" and not inputs.scenes[0].labelled
