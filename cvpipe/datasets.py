@@ -225,9 +225,20 @@ def find_logo(folder: str | os.PathLike) -> tuple[LogoInputs, list[dict]]:
         if not sub.is_dir():
             raise InputError(f"{sub}: no such folder (a logo folder holds gallery/ and scenes/)")
     dropped: list[dict] = []
-    gallery: dict[str, list[Path]] = {f.stem: [f] for f in images_in(gdir)}
+
+    def once(imgs: list[Path]) -> list[Path]:
+        # features are stored per file name without its suffix: `x.png` and `x.jpg` would overwrite each other
+        kept: dict[str, Path] = {}
+        for f in imgs:
+            if f.stem in kept:
+                _drop(dropped, f.relative_to(d).as_posix(), f"same name as {kept[f.stem].name}; rename one")
+            else:
+                kept[f.stem] = f
+        return list(kept.values())
+
+    gallery: dict[str, list[Path]] = {f.stem: [f] for f in once(images_in(gdir))}
     for sub in sorted(p for p in gdir.iterdir() if p.is_dir() and not p.name.startswith(".")):
-        imgs = images_in(sub)
+        imgs = once(images_in(sub))
         if not imgs:
             _drop(dropped, f"gallery/{sub.name}", "no images in this brand folder")
             continue
