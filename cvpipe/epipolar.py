@@ -44,6 +44,9 @@ _REFINE_ROUNDS = 5
 #: share of the F inliers that one homography may explain (within 2 x threshold) before the pair counts as
 #: degenerate: a planar scene or a pure camera rotation, where every point fits F for a whole family of F
 _PLANAR_SHARE = 0.95
+_PLANAR_MESSAGE = (f"{_PLANAR_SHARE:.0%} or more of the matches fit one homography: the scene is planar or the camera "
+                   "only rotated (no baseline), so the epipolar geometry is undetermined; move the camera sideways "
+                   "between the two photos")
 
 
 @dataclass(frozen=True, eq=False)
@@ -287,9 +290,9 @@ def sampson_distance(F, pts1, pts2) -> np.ndarray:
     F = np.asarray(F, dtype=np.float64)
     x1 = _hom(np.asarray(pts1, dtype=np.float64))
     x2 = _hom(np.asarray(pts2, dtype=np.float64))
-    Fx1 = np.einsum("...ij,nj->...ni", F, x1)
-    Ftx2 = np.einsum("...ji,nj->...ni", F, x2)
-    num = np.einsum("ni,...ni->...n", x2, Fx1)
+    Fx1 = x1 @ np.swapaxes(F, -1, -2)  # (..., N, 3)
+    Ftx2 = x2 @ F
+    num = (Fx1 * x2).sum(axis=-1)
     den = Fx1[..., 0] ** 2 + Fx1[..., 1] ** 2 + Ftx2[..., 0] ** 2 + Ftx2[..., 1] ** 2
     with np.errstate(divide="ignore", invalid="ignore"):
         d = np.abs(num) / np.sqrt(den)
@@ -417,6 +420,8 @@ def find_fundamental(pts1, pts2, threshold: float = 1.0, confidence: float = 0.9
                 denom = math.log1p(-min(w ** 7, 1 - 1e-16))
                 bound = min(float(max_iters), log1mconf / denom if denom < 0 else float(max_iters))
     if best_F is None:
+        if check_planar and _homography_share(p1, p2, threshold, gen) >= _PLANAR_SHARE:
+            raise EstimationError(_PLANAR_MESSAGE)
         raise EstimationError(f"all {attempts} sampled 7-point sets were degenerate; the correspondences are "
                               "nearly collinear or repeated")
     mask = sampson_distance(best_F, p1, p2) <= threshold
@@ -438,10 +443,7 @@ def find_fundamental(pts1, pts2, threshold: float = 1.0, confidence: float = 0.9
         raise EstimationError(
             f"only {int(mask.sum())} inliers after refitting (need {min_inliers}); supply better matches")
     if check_planar and _homography_share(p1[mask], p2[mask], threshold, gen) >= _PLANAR_SHARE:
-        raise EstimationError(
-            f"{_PLANAR_SHARE:.0%} or more of the matches fit one homography: the scene is planar or the camera only "
-            "rotated (no baseline), so the epipolar geometry is undetermined; move the camera sideways between "
-            "the two photos")
+        raise EstimationError(_PLANAR_MESSAGE)
     rms = float(np.sqrt(np.mean(d[mask] ** 2)))
     F = F.copy()
     F.setflags(write=False)

@@ -1,4 +1,6 @@
-"""``cvpipe stereo LEFT RIGHT --max-disp N [--method ...] -o OUT.npy [--json]``: disparity of a rectified pair."""
+"""``cvpipe stereo LEFT RIGHT --max-disp N|auto [--method ...] [--rectify] [--calib FILE] -o OUT.npy|OUT.png
+[--depth Z.npy|Z.png] [--ply P.ply] [--json]``: disparity of a pair (rectified first with ``--rectify``), and with a
+calibration its depth and coloured point cloud."""
 
 from __future__ import annotations
 
@@ -7,7 +9,8 @@ import dataclasses
 
 import numpy as np
 
-from .. import io, stereo
+from .. import depth as depth_mod
+from .. import io, rectify, stereo
 from ..errors import InputError
 from ..params import StereoBmParams, StereoSgbmParams, StereoSgmParams
 
@@ -25,12 +28,24 @@ CLI_METHODS = {
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("left", help="left image of the rectified pair")
     parser.add_argument("right", help="right image (same size; both colour or both grayscale)")
-    parser.add_argument("--max-disp", type=int, required=True,
-                        help="number of disparities searched, 0 .. N-1 (like OpenCV's numDisparities)")
+    parser.add_argument("--max-disp", type=_max_disp_arg, required=True,
+                        help="number of disparities searched, 0 .. N-1 (like OpenCV's numDisparities), or `auto`: "
+                             "estimated from the (rectified) feature matches")
     parser.add_argument("--method", choices=sorted(CLI_METHODS), default="sgm",
                         help="our semi-global matching (default) or an OpenCV baseline")
-    parser.add_argument("-o", "--out", required=True, help="output .npy: (H, W) float32 disparity, NaN = invalid")
-    parser.add_argument("--json", action="store_true", help='print {"valid_fraction": ...} on stdout')
+    parser.add_argument("-o", "--out", required=True,
+                        help="output .npy: (H, W) float32 disparity, NaN = invalid; or .png: a colour-mapped picture")
+    parser.add_argument("--rectify", action="store_true",
+                        help="rectify first: from --calib when it holds the rig's pose (OpenCV YAML), else from "
+                             "feature matches (fundamental matrix); the outputs are in the rectified LEFT frame")
+    parser.add_argument("--calib", help="calibration: Middlebury calib.txt or OpenCV stereo YAML (K1 D1 K2 D2 R T)")
+    parser.add_argument("--depth", help="depth output (needs --calib): .npy float32 in the baseline's unit, "
+                                        "NaN = invalid; or .png picture")
+    parser.add_argument("--ply", help="coloured point cloud of the valid pixels, binary PLY (needs --calib)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the RANSAC sampling (--rectify)")
+    parser.add_argument("--json", action="store_true",
+                        help='print {"valid_fraction", "max_disp", "disparity_only", ...; with --rectify "H_left", '
+                             '"H_right", "vertical_error_median_px", "vertical_error_p95_px"} on stdout')
 
 
 def _read(path: str) -> np.ndarray:
@@ -42,15 +57,104 @@ def _read(path: str) -> np.ndarray:
 
 
 def run(args: argparse.Namespace) -> int:
-    if not args.out.endswith(".npy"):
-        raise InputError(f"`--out` must end in .npy, got {args.out}")
+    for flag, path, kinds in (("--out", args.out, (".npy", ".png")), ("--depth", args.depth, (".npy", ".png")),
+                              ("--ply", args.ply, (".ply",))):
+        if path is not None and not path.lower().endswith(kinds):
+            raise InputError(f"`{flag}` must end in {' or '.join(kinds)}, got {path}")
     left, right = _read(args.left), _read(args.right)
+    calib = _read_calib(args.calib) if args.calib else None
+    if calib is None and (args.depth or args.ply):
+        raise InputError("`--depth` and `--ply` need `--calib FILE` (focal length and baseline)")
+    info, geometry, left, right, auto_disp = _prepare(args, left, right, calib)
+    max_disp = auto_disp if args.max_disp == "auto" else args.max_disp
     method, params_cls = CLI_METHODS[args.method]
     options = dataclasses.asdict(params_cls())
-    disp = stereo.compute_disparity(left, right, args.max_disp, method, **options)
-    with io.atomic_path(args.out) as tmp:
-        with open(tmp, "wb") as fh:
-            np.save(fh, disp.astype(np.float32), allow_pickle=False)
+    disp = stereo.compute_disparity(left, right, max_disp, method, **options)
+    _save_map(args.out, disp.astype(np.float32), 0.0, float(max_disp), "px", "disparity")
+    out = {"valid_fraction": float(np.isfinite(disp).mean()), "max_disp": int(max_disp), **info}
+    if geometry is not None:
+        z = depth_mod.depth_from_disparity(disp, geometry.focal, geometry.baseline, geometry.doffs)
+        out.update({"depth_unit": geometry.unit, "focal_px": geometry.focal, "baseline": geometry.baseline,
+                    "doffs_px": geometry.doffs, "depth_exact": geometry.exact})
+        if args.depth:
+            _save_map(args.depth, z, None, None, geometry.unit, "depth")
+        if args.ply:
+            xyz, rgb = depth_mod.point_cloud(z, left, geometry.focal, geometry.cx, geometry.cy)
+            data = depth_mod.ply_bytes(xyz, rgb, comment=f"units {geometry.unit}; camera frame x right y down z fwd")
+            with io.atomic_path(args.ply) as tmp:
+                tmp.write_bytes(data)
+            out["points"] = int(len(xyz))
     if args.json:
-        print(io.dumps_json({"valid_fraction": float(np.isfinite(disp).mean())}))
+        print(io.dumps_json(out))
     return 0
+
+
+def _max_disp_arg(text: str):
+    if text == "auto":
+        return "auto"
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1 or `auto`, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1 or `auto`, got {text!r}")
+    return v
+
+
+def _read_calib(path: str) -> rectify.Calibration:
+    try:
+        text = open(path, encoding="utf-8").read()
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: cannot read the calibration ({exc})") from None
+    return rectify.parse_calibration(text, path)
+
+
+def _prepare(args, left, right, calib):
+    """Rectify when asked; returns (JSON fields, depth geometry or None, left, right, auto max_disp)."""
+    import sys
+
+    if left.shape[:2] != right.shape[:2]:
+        raise InputError(f"{args.right}: size {right.shape[1]}x{right.shape[0]} differs from the left image's "
+                         f"{left.shape[1]}x{left.shape[0]}")
+    h, w = left.shape[:2]
+    if calib is not None:
+        calib.check_size((w, h))
+    info: dict = {"disparity_only": calib is None}
+    if calib is None:
+        info["note"] = "no calibration (--calib): only disparity is produced, no depth"
+        print(f"cvpipe: note: {info['note']}", file=sys.stderr)
+    need_matches = args.rectify or args.max_disp == "auto"
+    p1 = p2 = None
+    if need_matches:
+        from ..homography import correspondences
+
+        p1, p2 = correspondences(io.to_gray(left), io.to_gray(right))
+        info["matches"] = int(len(p1))
+    if not args.rectify:
+        geometry = None if calib is None else rectify.rectified_depth_geometry(calib)
+        auto = rectify.max_disp_from_matches(p1, p2) if args.max_disp == "auto" else None
+        return info, geometry, left, right, auto
+    if calib is not None and not calib.rectified:
+        rect = rectify.rectify_calibrated(calib, (w, h), p1, p2)
+        info["rectification"] = "calibrated"
+    else:
+        rect = rectify.rectify_uncalibrated(p1, p2, (w, h), calibration=calib, rng=args.seed)
+        info.update({"rectification": "uncalibrated", "inliers": rect.fit.num_inliers})
+    info.update({"H_left": rect.H_left, "H_right": rect.H_right, "shift_px": rect.shift,
+                 "disparity_range_px": list(rect.disparity_range),
+                 "vertical_error_median_px": rect.vertical_error_median,
+                 "vertical_error_p95_px": rect.vertical_error_p95})
+    left, right = rectify.warp_pair(left, right, rect)
+    return info, rect.depth, left, right, rect.max_disp
+
+
+def _save_map(path: str, values: np.ndarray, lo, hi, unit: str, label: str) -> None:
+    """.npy: the float32 array; .png: the colour-mapped picture with its colour bar."""
+    if path.lower().endswith(".png"):
+        io.save_image(path, depth_mod.colorize(values, lo, hi, unit=unit, label=label))
+        return
+    with io.atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.save(fh, values.astype(np.float32), allow_pickle=False)
