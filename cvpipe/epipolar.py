@@ -12,7 +12,8 @@ pair to the epipolar variety, in pixels) is at most ``threshold``. The pipeline 
    and the number of samples follows the adaptive bound ``log(1 - confidence) / log(1 - w^7)``;
 3. every so-far-best model is refitted by the normalized 8-point algorithm on its inliers (local optimization);
 4. the final model is refitted on its inliers by iteratively reweighted 8-point least squares, whose weights
-   turn the algebraic error into the Sampson distance, with the rank-2 constraint enforced by SVD after each round;
+   turn the algebraic error into the Sampson distance, with the rank-2 constraint enforced by SVD after each round,
+   then over every correspondence within twice the threshold with Tukey weights;
 5. degeneracy checks: too few correspondences or inliers, every point on one line, and inliers that one
    homography explains as well as ``F`` (a planar scene, or a pure rotation with no baseline), where ``F`` is not
    determined; each raises :class:`cvpipe.errors.EstimationError` saying what to change.
@@ -41,6 +42,9 @@ _RANK_EPS = 1e-9
 _ALL_COLLINEAR_EPS = 1e-6
 #: rounds of Sampson-reweighted 8-point refitting of the final model
 _REFINE_ROUNDS = 5
+#: the final refit weighs every correspondence by Tukey's biweight with this cut-off (in units of the threshold),
+#: as the homography's final refinement does: real matches have heavier tails than the threshold assumes
+_FINAL_WSCALE = 2.0
 #: share of the F inliers that one homography may explain (within 2 x threshold) before the pair counts as
 #: degenerate: a planar scene or a pure camera rotation, where every point fits F for a whole family of F
 _PLANAR_SHARE = 0.95
@@ -327,6 +331,23 @@ def _refit(x1n, x2n, p1, p2, T1, T2, mask, rounds):
     return _unit(T2.T @ Fn @ T1)
 
 
+def _refit_robust(x1n, x2n, p1, p2, T1, T2, F, threshold, rounds):
+    """Iteratively reweighted 8-point over every correspondence within ``_FINAL_WSCALE * threshold``: Sampson
+    weights times Tukey's biweight of the Sampson distance, so the result depends smoothly on the inlier set."""
+    c = _FINAL_WSCALE * threshold
+    for _ in range(rounds):
+        h1, h2 = _hom(p1), _hom(p2)
+        Fx1, Ftx2 = h1 @ F.T, h2 @ F
+        den = np.maximum(Fx1[:, 0] ** 2 + Fx1[:, 1] ** 2 + Ftx2[:, 0] ** 2 + Ftx2[:, 1] ** 2, 1e-300)
+        d = np.abs((Fx1 * h2).sum(axis=1)) / np.sqrt(den)
+        use = d < c
+        if use.sum() < 8:
+            break
+        w = (1.0 - (d[use] / c) ** 2) ** 2 / np.sqrt(den[use])
+        F = _unit(T2.T @ _eight_point_normalized(x1n[use], x2n[use], w / w.mean()) @ T1)
+    return F
+
+
 def _homography_share(p1: np.ndarray, p2: np.ndarray, threshold: float, rng: np.random.Generator) -> float:
     """Share of the correspondences that the best RANSAC homography maps within ``2 * threshold`` px."""
     from .homography import find_homography
@@ -437,6 +458,8 @@ def find_fundamental(pts1, pts2, threshold: float = 1.0, confidence: float = 0.9
         if new.sum() < min_inliers or np.array_equal(new, mask):
             break
         mask = new
+    if _FINAL_WSCALE > 0:
+        F = _refit_robust(x1n, x2n, p1, p2, T1, T2, F, float(threshold), _REFINE_ROUNDS)
     d = sampson_distance(F, p1, p2)
     mask = d <= threshold
     if mask.sum() < min_inliers:
