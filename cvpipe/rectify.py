@@ -519,8 +519,9 @@ def parse_opencv_calib(text: str, source: str = "stereo.yml") -> Calibration:
     """
     try:
         fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
-    except cv2.error as exc:
-        msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else "parse error"
+    except (cv2.error, SystemError) as exc:  # the Python binding wraps some parser errors in SystemError
+        cause = exc.__cause__ or exc.__context__ or exc
+        msg = str(cause).strip().splitlines()[-1] if str(cause).strip() else "parse error"
         raise InputError(f"{source}: not a readable OpenCV YAML/XML file ({msg})") from None
     if not fs.isOpened():
         raise InputError(f"{source}: not a readable OpenCV YAML/XML file")
