@@ -11,6 +11,8 @@ OpenCV SGBM is run in each of its four modes with block sizes 3, 5 and 7 (same r
 the lowest bad-2.0 on that pair is the baseline ("best of SGBM's modes"). Time: median over ``--repeats`` calls,
 the methods interleaved in this process after a warm-up call, so that load from other processes hits them alike.
 The one-off numba compile time is measured separately in a fresh interpreter with an empty cache.
+
+With ``--rectify`` the benchmark is the rectification one instead (``cvpipe.bench.stereo_rectify``).
 """
 
 from __future__ import annotations
@@ -66,8 +68,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--repeats", type=int, default=5, help="timed calls per pair and method (median)")
     parser.add_argument("--no-compile", action="store_true", help="skip the fresh-cache compile measurement")
     parser.add_argument("--rectify", action="store_true",
-                        help="instead: unrectify each pair by a seeded random rotation/shift/scale of the right view "
-                             "and compare our uncalibrated rectification with OpenCV's (see cvpipe.bench.stereo_rectify)")
+                        help="instead: unrectify each pair by a seeded random rotation/shift/scale of the right "
+                             "view and compare our uncalibrated rectification with OpenCV's "
+                             "(cvpipe.bench.stereo_rectify)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the unrectifying transforms (--rectify)")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
 

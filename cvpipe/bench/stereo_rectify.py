@@ -16,8 +16,11 @@ median and 95th percentile of their vertical error after rectification (px), the
 (aspect change and skew of its mid-lines, see :func:`cvpipe.rectify.distortion`), the rectification time (given
 the matches; median of ``--repeats`` interleaved calls after a warm-up), and bad-2.0 of our SGM on the rectified
 pair against the true disparity carried into the rectified frame, next to bad-2.0 on the original pair (both with
-the smallest multiple of 16 above the largest true disparity as range). OpenCV's rectification leaves negative
-disparities, so SGM (0 .. max_disp - 1) is run on ours only.
+the smallest multiple of 16 above the largest true disparity as range). The unrectifying warp itself pushes part
+of the right view out of the frame (a 3 degree turn moves it by ~30 px), which no rectification can bring back: so
+bad-2.0 is compared over the same scene points, those whose true match is still inside the unrectified right view
+(``bad_2.0_original_visible``); the plain ``bad_2.0_original`` over all pixels is reported too. OpenCV's
+rectification leaves negative disparities, so SGM (0 .. max_disp - 1) is run on ours only.
 """
 
 from __future__ import annotations
@@ -187,11 +190,14 @@ def run_rectify(args: argparse.Namespace, pairs: dict) -> int:
         rows.append({
             "pair": name, "size": [w, h], "unrectify": params, "matches": int(len(p1)),
             "inliers_ours": ours.fit.num_inliers, "inliers_opencv": int(cv_inl.sum()),
-            "vertical_median_px_ours": float(np.median(ev_ours)), "vertical_p95_px_ours": float(np.percentile(ev_ours, 95)),
-            "vertical_median_px_opencv": float(np.median(ev_cv)), "vertical_p95_px_opencv": float(np.percentile(ev_cv, 95)),
+            "vertical_median_px_ours": float(np.median(ev_ours)),
+            "vertical_p95_px_ours": float(np.percentile(ev_ours, 95)),
+            "vertical_median_px_opencv": float(np.median(ev_cv)),
+            "vertical_p95_px_opencv": float(np.percentile(ev_cv, 95)),
             "aspect_change_ours": dist_ours["aspect_change"], "skew_deg_ours": dist_ours["skew_deg"],
             "aspect_change_opencv": dist_cv["aspect_change"], "skew_deg_opencv": dist_cv["skew_deg"],
-            "bad_2.0_original": bad_orig, "bad_2.0_original_visible": bad_orig_vis, "bad_2.0_rectified": bad_rect, "max_disp_original": nd0,
+            "bad_2.0_original": bad_orig, "bad_2.0_original_visible": bad_orig_vis, "bad_2.0_rectified": bad_rect,
+            "max_disp_original": nd0,
             "max_disp_rectified": nd1, "max_disp_auto": ours.max_disp,
             "true_disparity_range_rectified": [float(np.percentile(finite, 0.5)), float(np.percentile(finite, 99.5))],
             "share_true_disparity_in_auto_range": float(((finite >= 0) & (finite < ours.max_disp)).mean()),
@@ -206,16 +212,16 @@ def run_rectify(args: argparse.Namespace, pairs: dict) -> int:
         "not_worse_than_opencv": {r["pair"]: bool(r["vertical_median_px_ours"] <= r["vertical_median_px_opencv"]
                                                   and r["vertical_p95_px_ours"] <= r["vertical_p95_px_opencv"])
                                   for r in rows},
-        "bad2_within": {r["pair"]: 100 * (r["bad_2.0_rectified"] - r["bad_2.0_original_visible"]) <= TARGETS["bad2_points"]
-                        for r in rows},
+        "bad2_within": {r["pair"]: bool(100 * (r["bad_2.0_rectified"] - r["bad_2.0_original_visible"])
+                                        <= TARGETS["bad2_points"]) for r in rows},
         "time_ok": {r["pair"]: r["seconds_ours"] < TARGETS["seconds"] for r in rows},
     }
     if args.json:
         print(io.dumps_json({"summary": summary, "rows": rows}))
         return 0
     print(f"{'pair':<11} {'vert med':>8} {'(cv)':>6} {'vert p95':>8} {'(cv)':>6} {'aspect%':>7} {'(cv)':>6} "
-          f"{'skew deg':>8} {'(cv)':>6} {'bad2 orig':>9} {'(visible)':>9} {'bad2 rect':>9} {'auto nd':>7} {'covered':>7} "
-          f"{'ours ms':>7} {'cv ms':>6}")
+          f"{'skew deg':>8} {'(cv)':>6} {'bad2 orig':>9} {'(visible)':>9} {'bad2 rect':>9} {'auto nd':>7} "
+          f"{'covered':>7} {'ours ms':>7} {'cv ms':>6}")
     for r in rows:
         print(f"{r['pair']:<11} {r['vertical_median_px_ours']:8.3f} {r['vertical_median_px_opencv']:6.3f} "
               f"{r['vertical_p95_px_ours']:8.3f} {r['vertical_p95_px_opencv']:6.3f} "
