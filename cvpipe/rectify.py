@@ -95,7 +95,8 @@ class Rectification:
     disparity_range : (float, float)
         Robust smallest and largest disparity of the inlier matches after rectification, pixels.
     vertical_error : (N,) float64
-        ``|y_left - y_right|`` of the inlier matches after rectification, pixels.
+        ``|y_left - y_right|`` of the inlier matches after rectification, pixels (calibrated: of the matches that
+        land within 2 px of the same row, empty without matches).
     fit : FundamentalFit or None
         The epipolar geometry (uncalibrated only).
     depth : DepthGeometry or None
@@ -260,6 +261,10 @@ def rectifying_homographies(F, pts1, pts2, size, margin: float = 1.0, right_anch
                               "cannot be rectified by homographies; take the photos side by side")
     G = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-er[2] / er[0], 0.0, 1.0]])
     H_left = np.linalg.inv(T) @ G @ R @ T
+    corners = np.array([[0.0, 0.0, 1.0], [w - 1, 0.0, 1.0], [0.0, h - 1, 1.0], [w - 1, h - 1, 1.0]])
+    if ((corners @ H_left[2]) <= 0).any():
+        raise EstimationError("the rectified left image would wrap through infinity (the epipole lies inside the "
+                              "image, the camera moved forward): take the photos side by side")
     # rows 2 and 3 of the right homography are fixed by F and H_left
     N = np.linalg.inv(H_left).T @ F.T
     r2, r3 = -N[2], N[1]
