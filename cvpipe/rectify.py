@@ -627,9 +627,24 @@ def rectify_calibrated(calib: Calibration, size, pts1=None, pts2=None, margin: f
 
 
 def rectified_depth_geometry(calib: Calibration) -> DepthGeometry:
-    """Depth geometry of an already rectified pair described by ``calib`` (Middlebury: used as is)."""
+    """Depth geometry of an already rectified pair described by ``calib`` (Middlebury: used as is).
+
+    Raises
+    ------
+    InputError
+        An OpenCV calibration whose cameras are not rectified (a rotation, lens distortion, different focal
+        lengths or rows, or a baseline off the x axis): the pair needs rectifying first.
+    """
+    if not calib.rectified:
+        K1, K2 = calib.K1, calib.K2
+        off_axis = np.abs(calib.T[1:]).max() > 1e-6 * calib.baseline
+        if (not np.allclose(calib.R, np.eye(3), atol=1e-9) or np.any(calib.D1) or np.any(calib.D2) or off_axis
+                or not np.isclose(K1[0, 0], K2[0, 0]) or not np.isclose(K1[1, 2], K2[1, 2])):
+            raise InputError(f"{calib.source}: the calibration describes cameras that are not rectified (R, D1/D2, "
+                             "T or K1/K2); add --rectify")
+    doffs = calib.doffs if calib.rectified else calib.K2[0, 2] - calib.K1[0, 2]
     return DepthGeometry(focal=float(calib.K1[0, 0]), cx=float(calib.K1[0, 2]), cy=float(calib.K1[1, 2]),
-                         baseline=calib.baseline, doffs=float(calib.doffs), unit=calib.unit, exact=True)
+                         baseline=calib.baseline, doffs=float(doffs), unit=calib.unit, exact=True)
 
 
 def warp_pair(left: np.ndarray, right: np.ndarray, rect: Rectification) -> tuple[np.ndarray, np.ndarray]:

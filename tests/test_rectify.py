@@ -208,6 +208,25 @@ class TestOpenCVCalib:
             rectify.parse_opencv_calib("%YAML:1.0\nK1: [unclosed\n", "bad.yml")
 
 
+class TestRectifiedGeometry:
+    def test_opencv_rig_must_be_rectified_to_be_used_as_is(self, tmp_path):
+        f = tmp_path / "stereo.yml"
+        write_opencv_yaml(f)  # R is a small rotation: not a rectified rig
+        c = rectify.parse_calibration(f.read_text(), str(f))
+        with pytest.raises(InputError, match=r"stereo\.yml: the calibration describes cameras that are not "
+                                             r"rectified .*add --rectify"):
+            rectify.rectified_depth_geometry(c)
+        fs = cv2.FileStorage("r.yml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
+        K2 = K.copy()
+        K2[0, 2] += 12.0
+        for k, v in {"K1": K, "D1": np.zeros(5), "K2": K2, "D2": np.zeros(5), "R": np.eye(3),
+                     "T": np.array([[-0.2], [0.0], [0.0]])}.items():
+            fs.write(k, v)
+        g = rectify.rectified_depth_geometry(rectify.parse_opencv_calib(fs.releaseAndGetString(), "r.yml"))
+        # a rectified rig: doffs is the difference of the principal columns, the baseline |T|
+        assert g.doffs == pytest.approx(12.0) and g.baseline == pytest.approx(0.2) and g.focal == 600.0
+
+
 class TestCalibrated:
     def test_known_rig_is_rectified_and_gives_metric_depth(self):
         R = rotation(0.01, -0.02, 0.015)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 
 import numpy as np
 
@@ -113,14 +114,14 @@ def _read_calib(path: str) -> rectify.Calibration:
 
 def _prepare(args, left, right, calib):
     """Rectify when asked; returns (JSON fields, depth geometry or None, left, right, auto max_disp)."""
-    import sys
-
     if left.shape[:2] != right.shape[:2]:
         raise InputError(f"{args.right}: size {right.shape[1]}x{right.shape[0]} differs from the left image's "
                          f"{left.shape[1]}x{left.shape[0]}")
     h, w = left.shape[:2]
     if calib is not None:
         calib.check_size((w, h))
+        if not args.rectify:
+            rectify.rectified_depth_geometry(calib)  # refuses an unrectified rig before the matching work
     info: dict = {"disparity_only": calib is None}
     if calib is None:
         info["note"] = "no calibration (--calib): only disparity is produced, no depth"
