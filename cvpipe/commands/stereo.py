@@ -85,6 +85,8 @@ def run(args: argparse.Namespace) -> int:
             with io.atomic_path(args.ply) as tmp:
                 tmp.write_bytes(data)
             out["points"] = int(len(xyz))
+    if "note" in out:  # after the work, so that a failure stays a single line on stderr
+        print(f"cvpipe: note: {out['note']}", file=sys.stderr)
     if args.json:
         print(io.dumps_json(out))
     return 0
@@ -125,7 +127,6 @@ def _prepare(args, left, right, calib):
     info: dict = {"disparity_only": calib is None}
     if calib is None:
         info["note"] = "no calibration (--calib): only disparity is produced, no depth"
-        print(f"cvpipe: note: {info['note']}", file=sys.stderr)
     need_matches = args.rectify or args.max_disp == "auto"
     p1 = p2 = None
     if need_matches:
