@@ -675,3 +675,25 @@ def max_disp_from_matches(pts1, pts2, max_dy: float = 1.5) -> int:
         raise EstimationError(f"only {len(d)} matches lie on the same row with a disparity >= 0: the pair does not "
                               "look rectified; pass `--rectify` or a number to `--max-disp`")
     return _max_disp(float(np.percentile(d, DISPARITY_PERCENTILES[1])))
+
+
+def looks_rectified(pts1, pts2, max_dy: float = 1.0, share: float = 0.9) -> bool:
+    """Whether a pair is already rectified: at least ``share`` of its matches lie within ``max_dy`` px of the same
+    row (a stage can then skip rectification, which makes it a no-op for rectified pairs).
+
+    Parameters
+    ----------
+    pts1, pts2 : (N, 2) array_like
+        Putative matches (left, right); the ratio test leaves a few outliers, hence ``share`` < 1.
+    max_dy : float
+        Row tolerance, pixels (SIFT keypoints are good to a few tenths of a pixel).
+    share : float
+        Fraction in (0, 1].
+    """
+    if not (0 < share <= 1) or not max_dy > 0:
+        raise InputError(f"`share` must be in (0, 1] and `max_dy` > 0, got {share!r} and {max_dy!r}")
+    p1 = np.asarray(pts1, dtype=np.float64).reshape(-1, 2)
+    p2 = np.asarray(pts2, dtype=np.float64).reshape(-1, 2)
+    if len(p1) == 0 or len(p1) != len(p2):
+        return False
+    return bool(np.mean(np.abs(p1[:, 1] - p2[:, 1]) <= max_dy) >= share)

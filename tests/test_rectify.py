@@ -289,3 +289,16 @@ def test_unrectified_sample_is_rectified_against_its_truth():
     disp = rectify.apply_h(rect.H_left, pl)[:, 0] - rectify.apply_h(rect.H_right, pr)[:, 0]
     # the search range 0 .. max_disp - 1 covers the scene (all but stray truth pixels)
     assert np.mean((disp >= -0.5) & (disp < rect.max_disp)) > 0.995
+
+
+def test_looks_rectified():
+    rng = np.random.default_rng(1)
+    p1 = rng.uniform(0, 600, (200, 2))
+    p2 = p1 - np.column_stack([rng.uniform(0, 40, 200), rng.normal(0, 0.2, 200)])
+    assert rectify.looks_rectified(p1, p2)
+    p2[:40, 1] += 30  # 20 % strays: the ratio test never leaves that many on a rectified pair
+    assert not rectify.looks_rectified(p1, p2)
+    _, _, c1, c2 = unrectified_pair(seed=0)
+    assert not rectify.looks_rectified(c1, c2)
+    with pytest.raises(InputError, match="`share`"):
+        rectify.looks_rectified(p1, p2, share=0)
