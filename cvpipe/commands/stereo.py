@@ -15,7 +15,8 @@ from .. import io, rectify, stereo
 from ..errors import InputError
 from ..params import StereoBmParams, StereoSgbmParams, StereoSgmParams
 
-HELP = "disparity map of a rectified stereo pair (float32 .npy of the LEFT image, NaN = invalid)"
+HELP = ("disparity map of a stereo pair (float32 .npy of the LEFT image, NaN = invalid), rectified first with "
+        "--rectify; depth and a point cloud with --calib")
 EXAMPLE = "cvpipe stereo data/samples/stereo/left.png data/samples/stereo/right.png --max-disp 64 -o disp.npy --json"
 
 #: command-line method name -> (cvpipe.stereo.METHODS key, params dataclass whose defaults the command uses)
@@ -27,7 +28,7 @@ CLI_METHODS = {
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("left", help="left image of the rectified pair")
+    parser.add_argument("left", help="left image of the pair (rectified, or use --rectify)")
     parser.add_argument("right", help="right image (same size; both colour or both grayscale)")
     parser.add_argument("--max-disp", type=_max_disp_arg, required=True,
                         help="number of disparities searched, 0 .. N-1 (like OpenCV's numDisparities), or `auto`: "
