@@ -243,3 +243,12 @@ def test_cli_calibrated_rectification_from_opencv_yaml(sample_pair, tmp_path, ca
     # SGM is off by > 2 px on ~15 % of the pixels; with the exact calibration the median relative error is ~1 %
     assert both.mean() > 0.6
     assert np.median(np.abs(ze[both] / zt[both] - 1)) < 0.02
+
+
+def test_cli_unrelated_photos_exit_1(tmp_path, capsys):
+    io.save_image(tmp_path / "a.png", samples.fit(samples.photo("astronaut"), 640, 480))
+    io.save_image(tmp_path / "b.png", samples.fit(samples.photo("coffee"), 640, 480))
+    code, out, err = run_cli(capsys, tmp_path / "a.png", tmp_path / "b.png", "--rectify", "--max-disp", "auto",
+                             "-o", tmp_path / "d.npy", "--json")
+    assert code == 1 and "share too little" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "d.npy").exists()
