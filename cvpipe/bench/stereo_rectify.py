@@ -14,7 +14,7 @@ True correspondences come from the true disparity of the original pair: the left
 matches (x - d, y) in the original right view, i.e. ``H_u (x - d, y)`` in the unrectified one. Reported per pair:
 median and 95th percentile of their vertical error after rectification (px), the distortion of the left image
 (aspect change and skew of its mid-lines, see :func:`cvpipe.rectify.distortion`), the rectification time (given
-the matches; median of ``--repeats`` interleaved calls after a warm-up), and bad-2.0 of our SGM on the rectified
+the matches; wall and CPU seconds, median of ``--repeats`` interleaved calls after a warm-up), and bad-2.0 of our SGM on the rectified
 pair against the true disparity carried into the rectified frame, next to bad-2.0 on the original pair (both with
 the smallest multiple of 16 above the largest true disparity as range). The unrectifying warp itself pushes part
 of the right view out of the frame (a 3 degree turn moves it by ~30 px), which no rectification can bring back: so
@@ -163,14 +163,16 @@ def run_rectify(args: argparse.Namespace, pairs: dict) -> int:
             t0 = time.perf_counter()
             rectify.rectify_uncalibrated(p1, p2, (w, h), threshold=THRESHOLD, rng=0)
             warm = time.perf_counter() - t0
-        ours_t, cv_t = [], []
+        ours_t, cv_t, ours_c, cv_c = [], [], [], []
         for k in range(args.repeats):  # interleaved, so that load from other processes hits both alike
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             ours = rectify.rectify_uncalibrated(p1, p2, (w, h), threshold=THRESHOLD, rng=k)
             ours_t.append(time.perf_counter() - t0)
-            t0 = time.perf_counter()
+            ours_c.append(time.process_time() - c0)
+            t0, c0 = time.perf_counter(), time.process_time()
             H1, H2, _, cv_inl = rectify.opencv_uncalibrated(p1, p2, (w, h), threshold=THRESHOLD)
             cv_t.append(time.perf_counter() - t0)
+            cv_c.append(time.process_time() - c0)
         pl, pr = true_correspondences(truth, H_u, (w, h))
         ev_ours = _vertical(ours.H_left, ours.H_right, pl, pr)
         ev_cv = _vertical(H1, H2, pl, pr)
@@ -202,6 +204,7 @@ def run_rectify(args: argparse.Namespace, pairs: dict) -> int:
             "true_disparity_range_rectified": [float(np.percentile(finite, 0.5)), float(np.percentile(finite, 99.5))],
             "share_true_disparity_in_auto_range": float(((finite >= 0) & (finite < ours.max_disp)).mean()),
             "seconds_ours": float(np.median(ours_t)), "seconds_opencv": float(np.median(cv_t)),
+            "cpu_seconds_ours": float(np.median(ours_c)), "cpu_seconds_opencv": float(np.median(cv_c)),
             "seconds_matching": t_match,
         })
     summary = {
@@ -221,7 +224,7 @@ def run_rectify(args: argparse.Namespace, pairs: dict) -> int:
         return 0
     print(f"{'pair':<11} {'vert med':>8} {'(cv)':>6} {'vert p95':>8} {'(cv)':>6} {'aspect%':>7} {'(cv)':>6} "
           f"{'skew deg':>8} {'(cv)':>6} {'bad2 orig':>9} {'(visible)':>9} {'bad2 rect':>9} {'auto nd':>7} "
-          f"{'covered':>7} {'ours ms':>7} {'cv ms':>6}")
+          f"{'covered':>7} {'ours ms':>7} {'cv ms':>6} {'ours cpu':>8} {'cv cpu':>6}")
     for r in rows:
         print(f"{r['pair']:<11} {r['vertical_median_px_ours']:8.3f} {r['vertical_median_px_opencv']:6.3f} "
               f"{r['vertical_p95_px_ours']:8.3f} {r['vertical_p95_px_opencv']:6.3f} "
@@ -230,7 +233,8 @@ def run_rectify(args: argparse.Namespace, pairs: dict) -> int:
               f"{100 * r['bad_2.0_original_visible']:8.2f}% "
               f"{100 * r['bad_2.0_rectified']:8.2f}% {r['max_disp_auto']:7d} "
               f"{100 * r['share_true_disparity_in_auto_range']:6.1f}% {1000 * r['seconds_ours']:7.1f} "
-              f"{1000 * r['seconds_opencv']:6.1f}")
+              f"{1000 * r['seconds_opencv']:6.1f} {1000 * r['cpu_seconds_ours']:8.1f} "
+              f"{1000 * r['cpu_seconds_opencv']:6.1f}")
     ok = {k: sum(v.values()) for k, v in summary.items() if k.endswith("_ok") or k in ("not_worse_than_opencv",
                                                                                         "bad2_within")}
     print("targets met (pairs of", len(rows), "):", ", ".join(f"{k} {v}" for k, v in ok.items()),
