@@ -19,9 +19,10 @@ solve. The steps:
    shearing transform (the mid-lines of the image stay perpendicular and keep their length ratio, i.e. no skew
    and no aspect change), then translated so that the right principal point (by default the image centre) keeps
    its column;
-4. a horizontal shift of the right image puts the smallest disparity of the inlier matches (robustly, their 0.5th
-   percentile) at ``margin`` pixels, so that a search over ``0 .. max_disp - 1`` covers the scene, and
-   ``max_disp`` is the smallest multiple of 16 above their 99.5th percentile plus a margin.
+4. a horizontal shift of the right image puts the smallest disparity of the inlier matches (robustly: isolated
+   strays dropped, then their 0.5th percentile, see :func:`robust_disparity_range`) at ``margin`` pixels, so that a
+   search over ``0 .. max_disp - 1`` covers the scene, and ``max_disp`` is the smallest multiple of 16 above their
+   robust largest disparity plus a margin.
 
 Calibrated: ``cv2.stereoRectify`` and ``cv2.initUndistortRectifyMap`` from the intrinsics, lens distortion and
 relative pose of a Middlebury ``calib.txt`` or an OpenCV stereo YAML file, with the same disparity shift. The
@@ -196,10 +197,36 @@ def _max_disp(hi: float) -> int:
     return int(max(16, math.ceil(top / 16.0) * 16))
 
 
+def robust_disparity_range(d) -> tuple[float, float]:
+    """Smallest and largest disparity of inlier matches, ignoring stray ones.
+
+    A false match along an epipolar line is an inlier of F with any disparity (e.g. two SIFT keypoints at one
+    place matched to a repeated texture 400 px away). Isolated extremes, separated from the rest by a gap of more
+    than ``max(8 px, 25 % of the remaining range)``, are dropped from each end (at most 2 % of the points per end),
+    then the nearest-rank percentiles of :data:`DISPARITY_PERCENTILES` are taken.
+    """
+    d = np.sort(np.asarray(d, dtype=np.float64).ravel())
+    if len(d) == 0:
+        raise EstimationError("no inlier matches to measure the disparity range")
+    budget = max(1, int(0.02 * len(d)))
+    lo_i, hi_i = 0, len(d) - 1
+    for _ in range(budget):
+        span = d[hi_i - 1] - d[lo_i] if hi_i - 1 > lo_i else 0.0
+        if hi_i > lo_i and d[hi_i] - d[hi_i - 1] > max(8.0, 0.25 * span):
+            hi_i -= 1
+    for _ in range(budget):
+        span = d[hi_i] - d[lo_i + 1] if lo_i + 1 < hi_i else 0.0
+        if lo_i < hi_i and d[lo_i + 1] - d[lo_i] > max(8.0, 0.25 * span):
+            lo_i += 1
+    kept = d[lo_i:hi_i + 1]
+    lo = np.percentile(kept, DISPARITY_PERCENTILES[0], method="higher")
+    hi = np.percentile(kept, DISPARITY_PERCENTILES[1], method="lower")
+    return float(lo), float(hi)
+
+
 def _disparity_shift(xl: np.ndarray, xr: np.ndarray, margin: float) -> tuple[float, float, float]:
     """(shift to add to the right x, robust low, robust high disparity after the shift)."""
-    d = xl - xr
-    lo, hi = np.percentile(d, DISPARITY_PERCENTILES)
+    lo, hi = robust_disparity_range(xl - xr)
     shift = float(lo - margin)
     return shift, float(lo - shift), float(hi - shift)
 
@@ -674,7 +701,7 @@ def max_disp_from_matches(pts1, pts2, max_dy: float = 1.5) -> int:
     if len(d) < 8:
         raise EstimationError(f"only {len(d)} matches lie on the same row with a disparity >= 0: the pair does not "
                               "look rectified; pass `--rectify` or a number to `--max-disp`")
-    return _max_disp(float(np.percentile(d, DISPARITY_PERCENTILES[1])))
+    return _max_disp(robust_disparity_range(d)[1])
 
 
 def looks_rectified(pts1, pts2, max_dy: float = 1.0, share: float = 0.9) -> bool:

@@ -245,7 +245,7 @@ class TestCalibrated:
         # reported geometry equals the depth along the rectified optical axis
         assert np.abs(q1[:, 1] - q2[:, 1]).max() < 1e-6
         d = q1[:, 0] - q2[:, 0]
-        assert np.percentile(d, 0.5) == pytest.approx(1.0, abs=1e-6) and d.max() < rect.max_disp
+        assert rectify.robust_disparity_range(d)[0] == pytest.approx(1.0, abs=1e-6) and d.max() < rect.max_disp
         g = rect.depth
         z = g.focal * g.baseline / (d + g.doffs)
         lx, ly, _, _ = rect.maps
@@ -302,3 +302,14 @@ def test_looks_rectified():
     assert not rectify.looks_rectified(c1, c2)
     with pytest.raises(InputError, match="`share`"):
         rectify.looks_rectified(p1, p2, share=0)
+
+
+def test_robust_disparity_range_ignores_strays():
+    rng = np.random.default_rng(2)
+    d = np.concatenate([rng.uniform(5, 48, 330), [437.2, 437.2, -200.0]])
+    lo, hi = rectify.robust_disparity_range(d)
+    # the strays (two duplicate keypoints matched 400 px away, one far negative) are dropped: the range is the
+    # scene's, within the nearest-rank 0.5 / 99.5 % trimming of 330 points (at most 2 points per end)
+    assert 5 <= lo < 6 and 47 < hi <= 48
+    with pytest.raises(EstimationError, match="no inlier matches"):
+        rectify.robust_disparity_range([])
