@@ -164,7 +164,7 @@ def test_cli_bad_calibration_exits_2(sample_pair, tmp_path, capsys):
     code, _, err = run_cli(capsys, *args, "--depth", tmp_path / "z.npy")
     assert code == 2 and "`--depth` and `--ply` need `--calib FILE`" in err
     code, _, err = run_cli(capsys, *args, "--ply", tmp_path / "p.txt", "--calib", folder / "calib.txt")
-    assert code == 2 and "`--ply` must end in .ply" in err
+    assert code == 2 and "`--ply` must end in one of .ply" in err
     assert not (tmp_path / "d.npy").exists()
 
 
