@@ -1,5 +1,87 @@
-"""One module per `cvpipe` subcommand.
+"""One module per `cvpipe` subcommand, plus the output helpers they share (progress bars, step timings, notes).
 
-Each module defines ``HELP`` (one line), ``EXAMPLE`` (one command line), ``add_arguments(parser)`` and
-``run(args) -> int``. ``cvpipe.cli`` lists them in ``COMMANDS``; a module that is absent is simply not offered.
+Each module defines ``HELP`` (one line), ``EXAMPLE`` (one command line that runs on the bundled samples),
+``add_arguments(parser)`` and ``run(args) -> int``. ``cvpipe.cli`` lists them in ``COMMANDS``; a module that is
+absent is simply not offered. ``HELP`` and ``EXAMPLE`` are plain string literals (``cvpipe --help`` reads them from
+the source), and module level imports stay light: OpenCV, numba and the algorithm modules are imported inside
+``run()``, so that ``cvpipe <cmd> --help`` answers at once.
 """
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import sys
+import time
+from typing import Iterable, Iterator, TypeVar
+
+T = TypeVar("T")
+
+log = logging.getLogger("cvpipe")
+
+#: set by :func:`configure_output` from ``-q``: no progress bars, no notes
+_quiet = False
+
+
+def configure_output(verbose: int = 0, quiet: bool = False) -> None:
+    """Route ``cvpipe`` logging to stderr: warnings by default, steps with ``-v``, debug with ``-vv``, errors with ``-q``."""
+    global _quiet
+    _quiet = bool(quiet)
+    level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(int(verbose), 2)]
+    log.setLevel(level)
+    if not log.handlers:
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("cvpipe: %(message)s"))
+        log.addHandler(handler)
+        log.propagate = False
+
+
+def progress(items: Iterable[T], desc: str, total: int | None = None) -> Iterable[T]:
+    """``items`` with a tqdm bar on stderr; none when stderr is not a terminal, with ``-q`` or for a single item."""
+    if total is None and hasattr(items, "__len__"):
+        total = len(items)  # type: ignore[arg-type]
+    if _quiet or (total is not None and total < 2):
+        return items
+    from tqdm import tqdm
+
+    return tqdm(items, desc=desc, total=total, disable=None, dynamic_ncols=True, leave=False)
+
+
+@contextlib.contextmanager
+def step(name: str) -> Iterator[None]:
+    """Log ``name`` and its wall time at INFO level (shown with ``-v``)."""
+    t0 = time.perf_counter()
+    yield
+    log.info("%s: %.3f s", name, time.perf_counter() - t0)
+
+
+def note(message: str) -> None:
+    """A one-line note on stderr (silenced by ``-q``)."""
+    if not _quiet:
+        print(f"cvpipe: {message}", file=sys.stderr, flush=True)
+
+
+def kernels_cached(*dispatchers) -> bool:
+    """True when every numba dispatcher given has a valid entry in its on-disk cache (``cache=True``).
+
+    Reads numba's cache index the way numba does (a stale index, e.g. after an upgrade or an edit, counts as
+    missing). Anything unexpected in numba's internals counts as cached, so the worst case is a missing note.
+    """
+    for d in dispatchers:
+        try:
+            cache_file = d._cache._cache_file
+            if not os.path.exists(cache_file._index_path) or not cache_file._load_index():
+                return False
+        except Exception:  # noqa: BLE001 - numba internals; never let the note break a command
+            continue
+    return True
+
+
+def compile_note(task: str, seconds: float, *dispatchers) -> None:
+    """Say once, on stderr, that the numba kernels of ``task`` are compiling (their cache is cold).
+
+    ``seconds`` is the measured one-off compile time on a developer machine (see BENCHMARKS.md, start-up).
+    """
+    if not kernels_cached(*dispatchers):
+        note(f"compiling the {task} kernels once, about {seconds:.0f} s (cached for the next runs)")
