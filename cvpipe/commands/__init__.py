@@ -85,3 +85,16 @@ def compile_note(task: str, seconds: float, *dispatchers) -> None:
     """
     if not kernels_cached(*dispatchers):
         note(f"compiling the {task} kernels once, about {seconds:.0f} s (cached for the next runs)")
+
+
+def with_flags(message: str, names: Iterable[str]) -> str:
+    """``message`` with each parameter name in ``names`` (``min_inliers``) spelt as its flag (``--min-inliers``).
+
+    Algorithm modules name parameters as ``params.yaml`` does; on the command line the hint must name the flag.
+    """
+    import re
+
+    for name in names:
+        flag = "--" + name.replace("_", "-")
+        message = re.sub(rf"`?(?<![\w-]){re.escape(name)}(?![\w-])`?", flag, message)
+    return message
