@@ -78,6 +78,14 @@ def kernels_cached(*dispatchers) -> bool:
     return True
 
 
+def numba_kernels(module) -> list:
+    """The numba dispatchers defined in ``module`` that are compiled on their own (``inline="always"`` ones are
+    compiled into their callers and never cached by themselves)."""
+    return [v for v in vars(module).values()
+            if hasattr(v, "_cache") and hasattr(v, "py_func") and getattr(v, "__module__", None) == module.__name__
+            and getattr(v, "targetoptions", {}).get("inline") != "always"]
+
+
 def compile_note(task: str, seconds: float, *dispatchers) -> None:
     """Say once, on stderr, that the numba kernels of ``task`` are compiling (their cache is cold).
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ..params import FeaturesParams, HomographyEstimateParams, MatchParams
-from . import compile_note, step
+from . import compile_note, numba_kernels, step
 
 HELP = "estimate the homography mapping image A to image B (ours or OpenCV's RANSAC/MAGSAC)"
 EXAMPLE = ("cvpipe homography data/samples/homography/0_astronaut_a.jpg data/samples/homography/0_astronaut_b.jpg "
@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     from .. import homography
 
     if args.method == "ours":
-        compile_note("homography", COMPILE_SECONDS, *homography_kernels(homography))
+        compile_note("homography", COMPILE_SECONDS, *numba_kernels(homography))
     with step("read"):
         a = io.read_image(args.a, "gray")
         b = io.read_image(args.b, "gray")
@@ -87,8 +87,3 @@ def run(args: argparse.Namespace) -> int:
         if args.overlay:
             print(f"overlay: {args.overlay}")
     return 0
-
-
-def homography_kernels(module) -> list:
-    """The numba dispatchers of ``module`` (those with an on-disk cache): the RANSAC loop compiles them all."""
-    return [v for v in vars(module).values() if hasattr(v, "_cache") and hasattr(v, "py_func")]

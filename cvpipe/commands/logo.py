@@ -6,14 +6,22 @@ import argparse
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from .. import io, logos
-from ..errors import CvpipeError, InputError
-from ..features import DETECTORS, detect
 from ..params import LogoFeaturesParams, LogoMatchParams, LogoVerifyParams
+from . import compile_note, numba_kernels, progress, step
+
+if TYPE_CHECKING:
+    from .. import logos
 
 HELP = "recognise gallery logos in scene photos (brand or none, and the logo outline)"
-EXAMPLE = "cvpipe logo data/samples/logo/scenes/scene_00.jpg --gallery data/samples/logo/gallery --json"
+EXAMPLE = ("cvpipe logo data/samples/logo/scenes/scene_00.jpg --gallery data/samples/logo/gallery "
+           "--overlay logo.png --json")
+
+#: one-off numba compile time of the homography kernels that verification uses, seconds (BENCHMARKS.md "start-up")
+COMPILE_SECONDS = 15
+#: ``--method`` choices: the keys of ``cvpipe.features.DETECTORS`` (a test keeps them equal)
+DETECTORS = ("akaze", "brisk", "orb", "sift")
 
 
 def gallery_files(folder: str | Path) -> list[tuple[str, Path]]:
@@ -24,6 +32,9 @@ def gallery_files(folder: str | Path) -> list[tuple[str, Path]]:
     InputError
         The folder does not exist or holds no image in either layout.
     """
+    from .. import io
+    from ..errors import InputError
+
     root = Path(folder)
     if not root.is_dir():
         raise InputError(f"{root}: gallery folder does not exist")
@@ -38,8 +49,11 @@ def gallery_files(folder: str | Path) -> list[tuple[str, Path]]:
 
 def load_gallery(folder: str | Path, detector: str, max_features: int, params: LogoMatchParams) -> logos.Gallery:
     """Read, detect and index a gallery folder (see :func:`gallery_files`)."""
+    from .. import io, logos
+    from ..features import detect
+
     refs = []
-    for brand, f in gallery_files(folder):
+    for brand, f in progress(gallery_files(folder), "gallery"):
         gray = io.read_image(f, "gray")
         refs.append(logos.Reference(brand, str(f), detect(gray, detector, max_features),
                                     (gray.shape[1], gray.shape[0])))
@@ -58,7 +72,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scenes", nargs="+", metavar="SCENE", help="scene photos")
     parser.add_argument("--gallery", required=True, metavar="DIR",
                         help="reference logos: DIR/<brand>.<ext> or DIR/<brand>/*.<ext>")
-    parser.add_argument("--method", default=fp.detector, choices=list(DETECTORS),
+    parser.add_argument("--method", type=str.lower, default=fp.detector, choices=DETECTORS,
                         help=f"keypoint detector (default {fp.detector})")
     parser.add_argument("--max-features", type=int, default=fp.max_features,
                         help=f"keypoints per image (default {fp.max_features})")
@@ -69,10 +83,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threshold", type=float, default=vp.score_threshold,
                         help=f"score (-log10 NFA) needed to name a brand (default {vp.score_threshold})")
     parser.add_argument("--seed", type=int, default=0, help="RANSAC seed (default 0)")
-    parser.add_argument("--json", action="store_true", help="print a JSON list, one record per scene")
+    parser.add_argument("--overlay", metavar="PNG",
+                        help="write the scene with the found logo outlined and named; with several scenes, PNG "
+                             "is a folder and each scene gets <scene>_logo.png")
+    parser.add_argument("--json", action="store_true",
+                        help='print a JSON list, one record per scene ({"scene", "brand", "inliers", "score", '
+                             '"quad", "overlay"})')
+
+
+def overlay_paths(scenes: list[str], overlay: str | None) -> list[str | None]:
+    """Where each scene's picture goes: ``overlay`` itself for one scene, ``overlay/<stem>_logo.png`` for several."""
+    if not overlay:
+        return [None] * len(scenes)
+    if len(scenes) == 1 and not overlay.endswith(("/", "\\")):
+        return [overlay]
+    stems = [Path(s).stem for s in scenes]
+    # scenes with one stem from different folders must not overwrite each other's picture
+    names = [f"{k:03d}_{st}" if stems.count(st) > 1 else st for k, st in enumerate(stems)]
+    return [str(Path(overlay) / f"{n}_logo.png") for n in names]
 
 
 def run(args: argparse.Namespace) -> int:
+    from .. import io, logos
+    from ..errors import CvpipeError, InputError
+    from ..features import detect
+    from ..overlays import draw_quads
+
     if args.max_features < 1:
         raise InputError(f"`--max-features` must be a positive integer, got {args.max_features}")
     try:
@@ -82,15 +118,24 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(str(exc).replace("`ratio`", "`--ratio`")) from exc
     if args.min_long_side < 0:
         raise InputError(f"`--min-long-side` must be a non-negative number of pixels, got {args.min_long_side}")
-    gallery = load_gallery(args.gallery, args.method, args.max_features, mp)
+    from .. import homography
+
+    compile_note("logo", COMPILE_SECONDS, *numba_kernels(homography))
+    with step(f"gallery ({args.method})"):
+        gallery = load_gallery(args.gallery, args.method, args.max_features, mp)
     records, failed = [], 0
-    for scene in args.scenes:
+    for scene, picture in progress(list(zip(args.scenes, overlay_paths(args.scenes, args.overlay))), "logo"):
         try:
-            gray = io.read_image(scene, "gray")
-            det = logos.recognize(gallery, detect(gray, args.method, args.max_features,
-                                                  min_long_side=args.min_long_side),
-                                  (gray.shape[1], gray.shape[0]), mp, vp, args.seed)
+            with step(scene):
+                gray = io.read_image(scene, "gray")  # as before: a JPEG decoded to gray is not cvtColor's gray
+                det = logos.recognize(gallery, detect(gray, args.method, args.max_features,
+                                                      min_long_side=args.min_long_side),
+                                      (gray.shape[1], gray.shape[0]), mp, vp, args.seed)
             records.append(detection_json(scene, det))
+            if picture:
+                found = [] if det.quad is None else [(det.quad, f"{det.brand} ({det.score:.1f})")]
+                io.save_image(picture, draw_quads(io.read_image(scene, "color"), [q for q, _ in found], [t for _, t in found]))
+                records[-1]["overlay"] = picture
         except CvpipeError as exc:
             # one bad scene must not cost the answers for the others
             failed += 1

@@ -5,21 +5,32 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
-import numpy as np
+from typing import TYPE_CHECKING
 
-from .. import io, stereo
-from ..errors import InputError
 from ..params import StereoBmParams, StereoSgbmParams, StereoSgmParams
+from . import compile_note, numba_kernels, step
+
+if TYPE_CHECKING:
+    import numpy as np
 
 HELP = "disparity map of a rectified stereo pair (float32 .npy of the LEFT image, NaN = invalid)"
-EXAMPLE = "cvpipe stereo data/samples/stereo/left.png data/samples/stereo/right.png --max-disp 64 -o disp.npy --json"
+EXAMPLE = ("cvpipe stereo data/samples/stereo/left.png data/samples/stereo/right.png --max-disp 64 -o disp.npy "
+           "--overlay disp.png --json")
 
-#: command-line method name -> (cvpipe.stereo.METHODS key, params dataclass whose defaults the command uses)
+#: ``--method`` (params.yaml's spelling, the keys of cvpipe.stereo.METHODS) -> the params dataclass whose defaults
+#: the command uses; ``opencv-sgbm`` with a hyphen is accepted too
 CLI_METHODS = {
-    "sgm": ("sgm", StereoSgmParams),
-    "opencv-sgbm": ("opencv_sgbm", StereoSgbmParams),
-    "opencv-bm": ("opencv_bm", StereoBmParams),
+    "sgm": StereoSgmParams,
+    "opencv_sgbm": StereoSgbmParams,
+    "opencv_bm": StereoBmParams,
 }
+#: one-off numba compile time of the SGM kernels, seconds (cold cache, BENCHMARKS.md "start-up")
+COMPILE_SECONDS = 30
+
+
+def method_name(text: str) -> str:
+    """A method name in params.yaml's spelling: ``opencv-sgbm`` and ``opencv_sgbm`` are the same method."""
+    return text.strip().lower().replace("-", "_")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,14 +38,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("right", help="right image (same size; both colour or both grayscale)")
     parser.add_argument("--max-disp", type=int, required=True,
                         help="number of disparities searched, 0 .. N-1 (like OpenCV's numDisparities)")
-    parser.add_argument("--method", choices=sorted(CLI_METHODS), default="sgm",
-                        help="our semi-global matching (default) or an OpenCV baseline")
-    parser.add_argument("-o", "--out", required=True, help="output .npy: (H, W) float32 disparity, NaN = invalid")
-    parser.add_argument("--json", action="store_true", help='print {"valid_fraction": ...} on stdout')
+    parser.add_argument("--method", type=method_name, choices=tuple(CLI_METHODS), default="sgm",
+                        help="our semi-global matching (default) or an OpenCV baseline (opencv-sgbm also accepted)")
+    parser.add_argument("-o", "--out", required=True,
+                        help="output .npy: (H, W) float32 disparity, NaN = invalid; or .png: the --overlay picture")
+    parser.add_argument("--overlay", metavar="PNG", help="write the colour-mapped disparity with a colour bar (px)")
+    parser.add_argument("--json", action="store_true", help='print {"valid_fraction", "out", "overlay"} on stdout')
 
 
 def _read(path: str) -> np.ndarray:
     """Gray stays gray and colour becomes BGR, so that a gray/colour mix is refused by the library."""
+    import numpy as np
+
+    from .. import io
+    from ..errors import InputError
+
     img = io.read_image(path, mode="unchanged")
     if img.dtype != np.uint8:
         raise InputError(f"{path}: expected an 8-bit image, got {img.dtype}")
@@ -42,15 +60,34 @@ def _read(path: str) -> np.ndarray:
 
 
 def run(args: argparse.Namespace) -> int:
-    if not args.out.endswith(".npy"):
-        raise InputError(f"`--out` must end in .npy, got {args.out}")
+    import numpy as np
+
+    from .. import io, stereo
+    from ..errors import InputError
+    from ..overlays import disparity_colormap
+
+    if not args.out.endswith((".npy", ".png")):
+        raise InputError(f"`--out` must end in .npy (disparity array) or .png (picture), got {args.out}")
+    pictures = [p for p in (args.overlay, args.out if args.out.endswith(".png") else None) if p]
     left, right = _read(args.left), _read(args.right)
-    method, params_cls = CLI_METHODS[args.method]
+    method, params_cls = args.method, CLI_METHODS[args.method]
     options = dataclasses.asdict(params_cls())
-    disp = stereo.compute_disparity(left, right, args.max_disp, method, **options)
-    with io.atomic_path(args.out) as tmp:
-        with open(tmp, "wb") as fh:
-            np.save(fh, disp.astype(np.float32), allow_pickle=False)
+    if method == "sgm":
+        compile_note("stereo", COMPILE_SECONDS, *numba_kernels(stereo))
+    with step(f"disparity ({method})"):
+        disp = stereo.compute_disparity(left, right, args.max_disp, method, **options)
+    result = {"valid_fraction": float(np.isfinite(disp).mean())}
+    if args.out.endswith(".npy"):
+        with io.atomic_path(args.out) as tmp:
+            with open(tmp, "wb") as fh:
+                np.save(fh, disp.astype(np.float32), allow_pickle=False)
+        result["out"] = args.out
+    for picture in pictures:
+        io.save_image(picture, disparity_colormap(disp, max_disp=args.max_disp - 1))
+    if args.overlay:
+        result["overlay"] = args.overlay
+    if args.out.endswith(".png"):
+        result["out"] = args.out
     if args.json:
-        print(io.dumps_json({"valid_fraction": float(np.isfinite(disp).mean())}))
+        print(io.dumps_json(result))
     return 0
