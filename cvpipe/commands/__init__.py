@@ -86,12 +86,23 @@ def numba_kernels(module) -> list:
             and getattr(v, "targetoptions", {}).get("inline") != "always"]
 
 
-def compile_note(task: str, seconds: float, *dispatchers) -> None:
-    """Say once, on stderr, that the numba kernels of ``task`` are compiling (their cache is cold).
+#: one-off numba compile time of each kernel module, seconds: the cold-cache minus the warm-cache wall time of the
+#: command that runs them, measured in a subprocess on the 2-core developer machine (README, "Start-up")
+COMPILE_SECONDS = {"cvpipe.hough": 4, "cvpipe.homography": 20, "cvpipe.stereo": 30, "cvpipe.blending": 2}
 
-    ``seconds`` is the measured one-off compile time on a developer machine (see BENCHMARKS.md, start-up).
+
+def compile_note(task: str, *modules) -> None:
+    """Say once, on stderr, that numba kernels of ``task`` are compiling because their on-disk cache is cold.
+
+    ``modules`` are kernel modules, or ``(module, dispatchers)`` pairs when a command runs only some of a module's
+    kernels. The time announced is the sum of :data:`COMPILE_SECONDS` over the modules with a cold kernel.
     """
-    if not kernels_cached(*dispatchers):
+    seconds = 0.0
+    for item in modules:
+        module, dispatchers = item if isinstance(item, tuple) else (item, numba_kernels(item))
+        if not kernels_cached(*dispatchers):
+            seconds += COMPILE_SECONDS.get(module.__name__, 5)
+    if seconds:
         note(f"compiling the {task} kernels once, about {seconds:.0f} s (cached for the next runs)")
 
 

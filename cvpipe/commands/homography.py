@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ..params import FeaturesParams, HomographyEstimateParams, MatchParams
-from . import compile_note, numba_kernels, step
+from . import compile_note, step
 
 HELP = "estimate the homography mapping image A to image B (ours or OpenCV's RANSAC/MAGSAC)"
 EXAMPLE = ("cvpipe homography data/samples/homography/0_astronaut_a.jpg data/samples/homography/0_astronaut_b.jpg "
@@ -15,8 +15,6 @@ EXAMPLE = ("cvpipe homography data/samples/homography/0_astronaut_a.jpg data/sam
 METHODS = ("ours", "opencv_ransac", "opencv_magsac")
 #: ``--detector`` choices: the keys of ``cvpipe.features.DETECTORS`` (a test keeps them equal)
 DETECTORS = ("akaze", "brisk", "orb", "sift")
-#: one-off numba compile time of the homography kernels, seconds (cold cache, BENCHMARKS.md "start-up")
-COMPILE_SECONDS = 15
 
 
 def method_name(text: str) -> str:
@@ -56,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     from .. import homography
 
     if args.method == "ours":
-        compile_note("homography", COMPILE_SECONDS, *numba_kernels(homography))
+        compile_note("homography", homography)
     with step("read"):
         a = io.read_image(args.a, "gray")
         b = io.read_image(args.b, "gray")

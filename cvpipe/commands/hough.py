@@ -15,8 +15,6 @@ EXAMPLE = "cvpipe hough data/samples/hough/synthetic_grid.png --threshold 100 --
 METHODS = ("ours", "opencv")
 #: lines printed by default: enough for any photo's main structure, few enough to read
 DEFAULT_MAX_LINES = 50
-#: one-off numba compile time of the Hough kernels, seconds (cold cache, measured for BENCHMARKS.md "start-up")
-COMPILE_SECONDS = 3
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -64,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
     if method == "ours":
         # the serial or the parallel vote, whichever this run will use (hough_accumulator's own choice)
         vote = hough._vote_parallel if hough._use_parallel(None) else hough._vote_serial
-        compile_note("hough", COMPILE_SECONDS, hough._edge_points, vote, hough._peaks)
+        compile_note("hough", (hough, [hough._edge_points, vote, hough._peaks]))
     e = HoughEdgesParams()
     with step("read"):
         gray = io.read_image(args.image, "gray")

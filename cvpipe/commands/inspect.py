@@ -7,24 +7,29 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-from tqdm import tqdm
+from types import SimpleNamespace
+from typing import TYPE_CHECKING
 
-from .. import defects, io
-from ..errors import CvpipeError, EstimationError
-from ..features import DETECTORS, detect
+from ..params import DefectDiffParams, DefectFeaturesParams, DefectRegionParams
+from . import compile_note, progress
+
+if TYPE_CHECKING:
+    from .. import defects
 
 HELP = "judge probe images faulty or perfect against a golden reference and outline the defects"
 EXAMPLE = "cvpipe inspect data/samples/defect/reference.png data/samples/defect/probes/*.png --out out/ --json"
 
-_DEFAULTS = defects.InspectParams()
+#: the defaults of defects.InspectParams (the same dataclasses), without importing the algorithm module
+_DEFAULTS = SimpleNamespace(features=DefectFeaturesParams(), diff=DefectDiffParams(), regions=DefectRegionParams())
+#: ``--detector`` choices: the keys of ``cvpipe.features.DETECTORS`` (a test keeps them equal)
+DETECTORS = ("akaze", "brisk", "orb", "sift")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("reference", help="golden reference image")
     parser.add_argument("probes", nargs="+", metavar="PROBE", help="probe images of the same part")
     parser.add_argument("--out", help="folder for overlays (<probe>_regions.png, <probe>_diff.png)")
-    parser.add_argument("--detector", choices=sorted(DETECTORS), default=_DEFAULTS.features.detector,
+    parser.add_argument("--detector", type=str.lower, choices=DETECTORS, default=_DEFAULTS.features.detector,
                         help=f"keypoints for the coarse registration (default {_DEFAULTS.features.detector})")
     parser.add_argument("--threshold", type=float, default=_DEFAULTS.regions.threshold,
                         help="difference threshold as a fraction of the reference contrast "
@@ -40,7 +45,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def params_from_args(args: argparse.Namespace) -> defects.InspectParams:
     """The inspection parameters: the dataclass defaults with the command-line overrides (validated there)."""
-    p = _DEFAULTS
+    from .. import defects
+
+    p = defects.InspectParams()
     try:
         return replace(p, features=replace(p.features, detector=args.detector),
                        diff=replace(p.diff, tolerance_radius=args.tolerance),
@@ -52,17 +59,24 @@ def params_from_args(args: argparse.Namespace) -> defects.InspectParams:
 
 def result_dict(probe: str, r: defects.Inspection) -> dict:
     """The JSON record of one inspected probe (the interface contract of DESIGN.md)."""
+    import numpy as np
+
     return {"probe": probe, "verdict": r.verdict, "score": round(r.score, 3),
             "regions": np.round(r.probe_regions, 2).tolist(), "H": r.registration.H.tolist()}
 
 
 def run(args: argparse.Namespace) -> int:
+    from .. import defects, homography, io
+    from ..errors import CvpipeError, EstimationError
+    from ..features import detect
+
     params = params_from_args(args)
+    compile_note("inspect", homography)
     reference = io.read_image(args.reference, "color")
     ref_gray = io.to_gray(reference)
     ref_feats = detect(ref_gray, params.features.detector, params.features.max_features)
     results, failed = [], 0
-    for path in tqdm(args.probes, desc="inspect", disable=None):
+    for path in progress(args.probes, "inspect"):
         try:
             probe = io.read_image(path, "color")
             r = defects.inspect(ref_gray, io.to_gray(probe), params, reference_features=ref_feats)
@@ -77,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
             stem = Path(path).stem
             io.save_image(Path(args.out) / f"{stem}_regions.png", defects.draw_regions(probe, r.probe_regions))
             io.save_image(Path(args.out) / f"{stem}_diff.png", defects.heat_map(r.difference.diff, r.threshold))
+            results[-1]["overlay"] = str(Path(args.out) / f"{stem}_regions.png")
     if args.out:
         io.save_json(Path(args.out) / "inspect.json", results)
     if args.json:

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..params import LogoFeaturesParams, LogoMatchParams, LogoVerifyParams
-from . import compile_note, numba_kernels, progress, step
+from . import compile_note, progress, step
 
 if TYPE_CHECKING:
     from .. import logos
@@ -18,8 +18,6 @@ HELP = "recognise gallery logos in scene photos (brand or none, and the logo out
 EXAMPLE = ("cvpipe logo data/samples/logo/scenes/scene_00.jpg --gallery data/samples/logo/gallery "
            "--overlay logo.png --json")
 
-#: one-off numba compile time of the homography kernels that verification uses, seconds (BENCHMARKS.md "start-up")
-COMPILE_SECONDS = 15
 #: ``--method`` choices: the keys of ``cvpipe.features.DETECTORS`` (a test keeps them equal)
 DETECTORS = ("akaze", "brisk", "orb", "sift")
 
@@ -120,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"`--min-long-side` must be a non-negative number of pixels, got {args.min_long_side}")
     from .. import homography
 
-    compile_note("logo", COMPILE_SECONDS, *numba_kernels(homography))
+    compile_note("logo", homography)
     with step(f"gallery ({args.method})"):
         gallery = load_gallery(args.gallery, args.method, args.max_features, mp)
     records, failed = [], 0

@@ -8,7 +8,7 @@ import dataclasses
 from typing import TYPE_CHECKING
 
 from ..params import StereoBmParams, StereoSgbmParams, StereoSgmParams
-from . import compile_note, numba_kernels, step
+from . import compile_note, step
 
 if TYPE_CHECKING:
     import numpy as np
@@ -24,8 +24,6 @@ CLI_METHODS = {
     "opencv_sgbm": StereoSgbmParams,
     "opencv_bm": StereoBmParams,
 }
-#: one-off numba compile time of the SGM kernels, seconds (cold cache, BENCHMARKS.md "start-up")
-COMPILE_SECONDS = 30
 
 
 def method_name(text: str) -> str:
@@ -73,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     method, params_cls = args.method, CLI_METHODS[args.method]
     options = dataclasses.asdict(params_cls())
     if method == "sgm":
-        compile_note("stereo", COMPILE_SECONDS, *numba_kernels(stereo))
+        compile_note("stereo", stereo)
     with step(f"disparity ({method})"):
         disp = stereo.compute_disparity(left, right, args.max_disp, method, **options)
     result = {"valid_fraction": float(np.isfinite(disp).mean())}
