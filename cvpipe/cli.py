@@ -140,7 +140,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="cvpipe",
         description="Reproducible classical computer-vision pipelines.",
-        epilog=f"example (on the bundled samples, `dvc repro samples` builds data/samples):\n  {EXAMPLE}\n\n"
+        epilog=f"example:\n  {EXAMPLE}\n\n"
+               "The examples run on the bundled samples in data/samples (built by `dvc repro samples`).\n"
                "`cvpipe COMMAND --help` describes a command and ends with an example.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
