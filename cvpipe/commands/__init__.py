@@ -30,11 +30,26 @@ def configure_output(verbose: int = 0, quiet: bool = False) -> None:
     _quiet = bool(quiet)
     level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(int(verbose), 2)]
     log.setLevel(level)
-    if not log.handlers:
-        handler = logging.StreamHandler(sys.stderr)
+    if not any(isinstance(h, _StderrHandler) for h in log.handlers):
+        handler = _StderrHandler()
         handler.setFormatter(logging.Formatter("cvpipe: %(message)s"))
         log.addHandler(handler)
         log.propagate = False
+
+
+class _StderrHandler(logging.StreamHandler):
+    """A handler writing to the current ``sys.stderr`` (which tests and embedding programs may replace)."""
+
+    def __init__(self):
+        super().__init__(sys.stderr)
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value):
+        pass
 
 
 def progress(items: Iterable[T], desc: str, total: int | None = None) -> Iterable[T]:
