@@ -10,8 +10,8 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import TYPE_CHECKING
 
-from ..params import DefectDiffParams, DefectFeaturesParams, DefectRegionParams
-from . import compile_note, progress
+from ..params import DefectDiffParams, DefectFeaturesParams, DefectRegionParams, DefectRegisterParams
+from . import compile_note, progress, with_flags
 
 if TYPE_CHECKING:
     from .. import defects
@@ -20,7 +20,8 @@ HELP = "judge probe images faulty or perfect against a golden reference and outl
 EXAMPLE = "cvpipe inspect data/samples/defect/reference.png data/samples/defect/probes/*.png --out out/ --json"
 
 #: the defaults of defects.InspectParams (the same dataclasses), without importing the algorithm module
-_DEFAULTS = SimpleNamespace(features=DefectFeaturesParams(), diff=DefectDiffParams(), regions=DefectRegionParams())
+_DEFAULTS = SimpleNamespace(features=DefectFeaturesParams(), diff=DefectDiffParams(), regions=DefectRegionParams(),
+                            register=DefectRegisterParams())
 #: ``--detector`` choices: the keys of ``cvpipe.features.DETECTORS`` (a test keeps them equal)
 DETECTORS = ("akaze", "brisk", "orb", "sift")
 
@@ -40,6 +41,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"smallest defect kept, px (default {_DEFAULTS.regions.min_area})")
     parser.add_argument("--pad", type=float, default=_DEFAULTS.regions.pad,
                         help=f"pad the probe boxes by this many px (default {_DEFAULTS.regions.pad:g})")
+    parser.add_argument("--ecc-levels", type=int, default=_DEFAULTS.register.ecc_levels,
+                        help=f"pyramid levels of the ECC refinement (default {_DEFAULTS.register.ecc_levels})")
     parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
 
 
@@ -51,6 +54,7 @@ def params_from_args(args: argparse.Namespace) -> defects.InspectParams:
     try:
         return replace(p, features=replace(p.features, detector=args.detector),
                        diff=replace(p.diff, tolerance_radius=args.tolerance),
+                       register=replace(p.register, ecc_levels=args.ecc_levels),
                        regions=replace(p.regions, threshold=args.threshold, min_area=args.min_area, pad=args.pad,
                                        seed_threshold=max(p.regions.seed_threshold, args.threshold)))
     except ValueError as exc:
@@ -81,6 +85,7 @@ def run(args: argparse.Namespace) -> int:
             probe = io.read_image(path, "color")
             r = defects.inspect(ref_gray, io.to_gray(probe), params, reference_features=ref_feats)
         except CvpipeError as exc:
+            exc = type(exc)(with_flags(str(exc), ["ecc_levels"]))  # the hint names this command's flag
             failed += 1
             print(f"cvpipe: error: {path}: {exc}", file=sys.stderr)
             results.append({"probe": path, "verdict": None, "score": None, "regions": [], "H": None,
