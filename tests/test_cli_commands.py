@@ -324,3 +324,54 @@ def test_verbose_logs_steps_and_quiet_silences_notes(workdir, capsys):
     assert capsys.readouterr().err == ""  # the deprecation note too
     assert cli.main(["hough", img, "--threshold", "100"]) == 0
     assert "cvpipe: lines" not in capsys.readouterr().err  # steps are not logged by default
+
+
+# ------------------------------------------------------------------------------------------------ several logos
+
+
+def test_two_gallery_brands_in_one_photo_are_both_found(workdir, tmp_path, capsys):
+    """A photo with two gallery marks pasted at known places: both brands reported, each outline where it was put."""
+    gallery = workdir / "data" / "samples" / "logo" / "gallery"
+    rng = np.random.default_rng(1)
+    scene = samples.fit(samples.photo("coffee"), 800, 600)
+    truth = {}
+    for brand, centre in (("starbucks", (220, 300)), ("redbull", (580, 280))):
+        mark = cv2.imread(str(gallery / f"{brand}.png"))
+        H = samples.random_view(rng, mark.shape[0] - 1, centre, 260 / mark.shape[0], 10, 0.03)
+        scene = samples.paste(scene, mark, H)
+        h, w = mark.shape[:2]
+        truth[brand] = samples.apply_homography(H, samples.corners(w, h))
+    path = tmp_path / "two.png"
+    io.save_image(path, scene)
+    rec = _run_json(["logo", str(path), "--gallery", str(gallery), "--overlay", str(tmp_path / "o.png"), "--json"],
+                    capsys)[0]
+    found = {d["brand"]: np.array(d["quad"]) for d in rec["logos"]}
+    assert set(found) == set(truth)  # both brands, and nothing else
+    assert rec["brand"] == rec["logos"][0]["brand"]  # the one-brand answer is the best of the list
+    scores = [d["score"] for d in rec["logos"]]
+    assert scores == sorted(scores, reverse=True)
+    for brand, quad in found.items():
+        # corners within 5 px of where the mark was pasted (2% of the ~260 px mark; each outline rests on 70+ inliers)
+        assert np.abs(quad - truth[brand]).max() < 5.0, brand
+
+
+def test_overlapping_outlines_keep_only_the_best():
+    from types import SimpleNamespace
+
+    from cvpipe.commands.logo import every_logo, quad_iou
+
+    sq = np.array([[0, 0], [100, 0], [100, 100], [0, 100]], float)
+    assert quad_iou(sq, sq) == pytest.approx(1.0)
+    assert quad_iou(sq, sq + [200, 0]) == 0.0
+    assert quad_iou(sq, sq + [50, 0]) == pytest.approx(50 * 100 / (2 * 100 * 100 - 50 * 100))  # 1/3
+
+    def hyp(brand, score, quad, plausible=True):
+        return SimpleNamespace(brand=brand, score=score, inliers=20, quad=quad, plausible=plausible)
+
+    det = SimpleNamespace(hypotheses=[
+        hyp("a", 50.0, sq), hyp("b", 40.0, sq + [10, 10]),  # b overlaps a (IoU 0.68): suppressed
+        hyp("c", 30.0, sq + [300, 0]),  # elsewhere: kept
+        hyp("d", 90.0, sq + [600, 0], plausible=False),  # implausible: never reported
+        hyp("e", -1.0, sq + [900, 0])])  # below the threshold 0
+    assert [h.brand for h in every_logo(det, 0.0)] == ["a", "c"]
+    assert [h.brand for h in every_logo(det, 0.0, max_overlap=0.9)] == ["a", "b", "c"]

@@ -58,11 +58,48 @@ def load_gallery(folder: str | Path, detector: str, max_features: int, params: L
     return logos.build_gallery(refs, params.min_features, params.reference_features, params.register_references)
 
 
-def detection_json(scene: str, det: logos.Detection) -> dict:
+#: two found outlines overlapping by more than this intersection-over-union are one logo (the better one is kept)
+MAX_OVERLAP = 0.3
+
+
+def quad_iou(a, b) -> float:
+    """Intersection over union of two convex quadrilaterals ((4, 2) corner arrays, scene pixels)."""
+    import cv2
+    import numpy as np
+
+    pa, pb = np.asarray(a, np.float32).reshape(4, 2), np.asarray(b, np.float32).reshape(4, 2)
+    area_a, area_b = abs(cv2.contourArea(pa)), abs(cv2.contourArea(pb))
+    inter, _ = cv2.intersectConvexConvex(pa, pb)
+    union = area_a + area_b - inter
+    return float(inter / union) if union > 0 else 0.0
+
+
+def every_logo(det: logos.Detection, score_threshold: float, max_overlap: float = MAX_OVERLAP) -> list:
+    """Every plausible hypothesis of a scene that reaches ``score_threshold``, best first, after non-maximum
+    suppression: a hypothesis whose outline overlaps a better one by more than ``max_overlap`` IoU is dropped.
+
+    The first entry, when there is one, is the scene's ``brand`` (the same ordering as ``logos.decide``).
+    """
+    good = sorted((h for h in det.hypotheses if h.plausible and h.quad is not None and h.score >= score_threshold),
+                  key=lambda h: (h.score, h.inliers), reverse=True)
+    kept: list = []
+    for h in good:
+        if all(quad_iou(h.quad, k.quad) <= max_overlap for k in kept):
+            kept.append(h)
+    return kept
+
+
+def _logo_json(h) -> dict:
+    return {"brand": h.brand, "score": round(float(h.score), 3), "inliers": int(h.inliers),
+            "quad": [[round(float(x), 2), round(float(y), 2)] for x, y in h.quad]}
+
+
+def detection_json(scene: str, det: logos.Detection, found: list | None = None) -> dict:
     """The interface-contract record of one scene (``score`` is null when no hypothesis survived)."""
     return {"scene": scene, "brand": det.brand, "inliers": int(det.inliers),
             "score": round(float(det.score), 3) if math.isfinite(det.score) else None,
-            "quad": None if det.quad is None else [[round(float(x), 2), round(float(y), 2)] for x, y in det.quad]}
+            "quad": None if det.quad is None else [[round(float(x), 2), round(float(y), 2)] for x, y in det.quad],
+            "logos": [_logo_json(h) for h in (found or [])]}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -82,11 +119,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"score (-log10 NFA) needed to name a brand (default {vp.score_threshold})")
     parser.add_argument("--seed", type=int, default=0, help="RANSAC seed (default 0)")
     parser.add_argument("--overlay", metavar="PNG",
-                        help="write the scene with the found logo outlined and named; with several scenes, PNG "
+                        help="write the scene with each found logo outlined and named; with several scenes, PNG "
                              "is a folder and each scene gets <scene>_logo.png")
     parser.add_argument("--json", action="store_true",
                         help='print a JSON list, one record per scene ({"scene", "brand", "inliers", "score", '
-                             '"quad", "overlay"})')
+                             '"quad", "logos": [every brand found, best first], "overlay"})')
 
 
 def overlay_paths(scenes: list[str], overlay: str | None) -> list[str | None]:
@@ -129,16 +166,17 @@ def run(args: argparse.Namespace) -> int:
                 det = logos.recognize(gallery, detect(gray, args.method, args.max_features,
                                                       min_long_side=args.min_long_side),
                                       (gray.shape[1], gray.shape[0]), mp, vp, args.seed)
-            records.append(detection_json(scene, det))
+            found = every_logo(det, vp.score_threshold)
+            records.append(detection_json(scene, det, found))
             if picture:
-                found = [] if det.quad is None else [(det.quad, f"{det.brand} ({det.score:.1f})")]
-                io.save_image(picture, draw_quads(io.read_image(scene, "color"), [q for q, _ in found], [t for _, t in found]))
+                io.save_image(picture, draw_quads(io.read_image(scene, "color"), [h.quad for h in found],
+                                                  [f"{h.brand} ({h.score:.0f})" for h in found]))
                 records[-1]["overlay"] = picture
         except CvpipeError as exc:
             # one bad scene must not cost the answers for the others
             failed += 1
             print(f"cvpipe: error: {exc}", file=sys.stderr)
-            records.append({"scene": scene, "brand": None, "inliers": 0, "score": None, "quad": None,
+            records.append({"scene": scene, "brand": None, "inliers": 0, "score": None, "quad": None, "logos": [],
                             "error": str(exc)})
     if args.json:
         print(io.dumps_json(records))
