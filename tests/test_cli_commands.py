@@ -210,11 +210,14 @@ def test_stitch_json_names_files(workdir, tmp_path, capsys):
     files = sorted(glob.glob(str(workdir / "data" / "samples" / "panorama" / "coffee" / "*.jpg")))
     bad = tmp_path / "broken.jpg"
     bad.write_bytes(b"not an image")
-    res = _run_json(["stitch", *files, str(bad), "-o", str(tmp_path / "p.png"), "--json"], capsys)
+    res = _run_json(["stitch", *files, str(bad), "-o", str(tmp_path / "p.png"), "--overlay", str(tmp_path / "o.png"),
+                     "--json"], capsys)
     assert sorted(res["used"]) == files and res["reference"] in files
     assert res["dropped"] == [{"image": str(bad), "reason": res["dropped"][0]["reason"]}]
     assert res["out"] == str(tmp_path / "p.png")
-    assert list(cv2.imread(res["out"]).shape[1::-1]) == res["size"]
+    pano, pic = cv2.imread(res["out"]), cv2.imread(res["overlay"])
+    assert list(pano.shape[1::-1]) == res["size"] and pic.shape == pano.shape
+    assert 0 < np.mean(np.any(pic != pano, axis=2)) < 0.2  # outlines and names drawn over an unchanged panorama
 
 
 # ------------------------------------------------------------------------------------------------ vocabulary

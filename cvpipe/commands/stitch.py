@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import replace
+from pathlib import Path
 
 from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
                       PanoramaWarpParams)
@@ -45,6 +46,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--compose-megapix", type=float, default=_W.compose_megapix,
                         help=f"output resolution in megapixels per image, <= 0 for full (default {_W.compose_megapix})")
     parser.add_argument("--no-crop", action="store_true", help="keep the empty borders (default: crop them)")
+    parser.add_argument("--overlay", metavar="PNG",
+                        help="write the panorama with each used photo's outline and name (--projection plane)")
     parser.add_argument("--seed", type=int, default=_M.seed, help=f"RANSAC seed (default {_M.seed})")
     parser.add_argument("--json", action="store_true",
                         help='print {"out", "used": [paths], "dropped": [{"image": path, "reason"}], "homographies", '
@@ -65,6 +68,9 @@ def run(args: argparse.Namespace) -> int:
             positions.append(k)
         except InputError as exc:
             dropped.append({"image": k, "reason": f"unreadable: {exc}"})
+    if args.overlay and args.projection != "plane":
+        raise InputError(f"`--overlay` draws the photos' outlines through plane homographies; it needs "
+                         f"--projection plane, got {args.projection}")
     if len(images) < 2:
         why = "; ".join(d["reason"] for d in dropped)
         raise InputError(f"a panorama needs at least two readable images, got {len(images)}" + (f" ({why})" if why
@@ -97,8 +103,16 @@ def run(args: argparse.Namespace) -> int:
     plane = args.projection == "plane"
     homs = [(pano.to_panorama @ pano.homographies[a]) if plane else pano.homographies[a] for a in reg.used]
     homs = [H / H[2, 2] for H in homs]
+    if args.overlay:
+        from ..overlays import draw_quads
+
+        shapes = [images[a].shape for a in reg.used]
+        quads = [_outline(H, sh[1], sh[0]) for H, sh in zip(homs, shapes)]
+        io.save_image(args.overlay, draw_quads(pano.image, quads, [Path(args.images[positions[a]]).name
+                                                                   for a in reg.used]))
     result = {
         "out": args.out,
+        **({"overlay": args.overlay} if args.overlay else {}),
         "used": [args.images[positions[a]] for a in reg.used],
         "dropped": dropped,
         "homographies": [np.round(H, 10) for H in homs],
@@ -113,3 +127,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"{args.out}: {result['size'][0]}x{result['size'][1]} from {len(result['used'])} images: "
               + ", ".join(result["used"]) + "".join(f"\n  dropped {d['image']}: {d['reason']}" for d in dropped))
     return 0
+
+
+def _outline(H, width: int, height: int):
+    """The outline of a ``width`` x ``height`` photo (corner pixel centres) mapped by ``H``, (4, 2)."""
+    import numpy as np
+
+    c = np.array([[0, 0, 1], [width - 1, 0, 1], [width - 1, height - 1, 1], [0, height - 1, 1]], float) @ H.T
+    return c[:, :2] / c[:, 2:]
