@@ -151,6 +151,15 @@ def test_help_example_runs_on_the_samples_and_names_its_pictures(name, workdir, 
             assert img is not None and img.ndim == 3 and img.dtype == np.uint8, path
 
 
+def test_top_level_help_example_runs_on_the_samples(workdir, monkeypatch, capsys):
+    with pytest.raises(SystemExit):
+        cli.main(["--help"])
+    assert f"example:\n  {cli.EXAMPLE}\n" in capsys.readouterr().out
+    monkeypatch.chdir(workdir)
+    assert cli.main(_example_argv(cli.EXAMPLE, workdir)) == 0
+    assert "lines (ours)" in capsys.readouterr().out
+
+
 def _run_json(argv, capsys) -> dict:
     assert cli.main(argv) == 0
     return json.loads(capsys.readouterr().out)
