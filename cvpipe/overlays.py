@@ -93,7 +93,8 @@ def checkerboard_warp(a: np.ndarray, b: np.ndarray, H: np.ndarray, tile: int = 0
     # H maps A -> B, so sampling B at H(x) for every pixel x of A is WARP_INVERSE_MAP with H itself
     flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
     warped = cv2.warpPerspective(B, H, (w, h), flags=flags)
-    cover = cv2.warpPerspective(np.full(B.shape[:2], 255, np.uint8), H, (w, h), flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP) > 0
+    cover = cv2.warpPerspective(np.full(B.shape[:2], 255, np.uint8), H, (w, h),
+                                flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP) > 0
     t = tile or max(8, max(h, w) // 8)
     yy, xx = np.mgrid[0:h, 0:w]
     use_b = cover & (((yy // t) + (xx // t)) % 2 == 1)

@@ -35,7 +35,7 @@ def _env() -> dict:
 
 @pytest.fixture(scope="module")
 def workdir(tmp_path_factory) -> Path:
-    """A working directory whose ``data/samples`` holds the bundled samples (fewer logo scenes: only scene_00 is used)."""
+    """A working directory whose ``data/samples`` holds the bundled samples (fewer logo scenes: examples use one)."""
     root = tmp_path_factory.mktemp("cli")
     out = root / "data" / "samples"
     for task, s in samples.build_all(SamplesParams().seed, logo_scenes=2, logo_negatives=1).items():
@@ -94,8 +94,9 @@ def test_a_command_imports_only_what_it_runs(workdir):
     img = workdir / "data" / "samples" / "hough" / "synthetic_grid.png"
     code = ("import sys\nfrom cvpipe import cli\n"
             f"cli.main(['hough', {str(img)!r}, '--method', 'opencv', '--json'])\n"
-            "print('RESULT', ','.join(sorted(m for m in ('scipy.stats', 'scipy.sparse', 'cvpipe.logos', 'cvpipe.stereo',"
-            " 'cvpipe.panorama', 'cvpipe.defects', 'cvpipe.homography') if m in sys.modules)) or '-', file=sys.stderr)\n")
+            "heavy = ('scipy.stats', 'scipy.sparse', 'cvpipe.logos', 'cvpipe.stereo', 'cvpipe.panorama',"
+            " 'cvpipe.defects', 'cvpipe.homography')\n"
+            "print('RESULT', ','.join(sorted(m for m in heavy if m in sys.modules)) or '-', file=sys.stderr)\n")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=_env(), cwd=ROOT)
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr.strip().splitlines()[-1] == "RESULT -"

@@ -25,7 +25,8 @@ _quiet = False
 
 
 def configure_output(verbose: int = 0, quiet: bool = False) -> None:
-    """Route ``cvpipe`` logging to stderr: warnings by default, steps with ``-v``, debug with ``-vv``, errors with ``-q``."""
+    """Route ``cvpipe`` logging to stderr: warnings by default, steps with ``-v``, debug with ``-vv``, only errors
+    with ``-q`` (which also hides progress bars and notes)."""
     global _quiet
     _quiet = bool(quiet)
     level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(int(verbose), 2)]

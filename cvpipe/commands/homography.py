@@ -35,8 +35,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ratio", type=float, default=m.ratio, help=f"Lowe's ratio test (default: {m.ratio})")
     parser.add_argument("--threshold", type=float, default=e.threshold,
                         help=f"inlier reprojection threshold in pixels of B (default: {e.threshold})")
-    parser.add_argument("--confidence", type=float, default=e.confidence, help=f"RANSAC confidence (default: {e.confidence})")
-    parser.add_argument("--max-iters", type=int, default=e.max_iters, help=f"RANSAC iterations at most (default: {e.max_iters})")
+    parser.add_argument("--confidence", type=float, default=e.confidence,
+                        help=f"RANSAC confidence (default: {e.confidence})")
+    parser.add_argument("--max-iters", type=int, default=e.max_iters,
+                        help=f"RANSAC iterations at most (default: {e.max_iters})")
     parser.add_argument("--seed", type=int, default=e.seed, help=f"random seed (default: {e.seed})")
     parser.add_argument("--overlay", metavar="PNG",
                         help="write B warped onto A as a checkerboard with A (straight edges across tiles = good H)")
