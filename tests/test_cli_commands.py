@@ -118,6 +118,26 @@ def test_cold_numba_cache_is_announced_once(workdir, tmp_path):
     assert quiet.returncode == 0 and quiet.stderr == ""
 
 
+def test_every_numba_kernel_is_cached_on_disk():
+    """A kernel without cache=True would recompile in every process: the warm start-up depends on all of them."""
+    import importlib
+    import pkgutil
+
+    import cvpipe
+
+    kernels = []
+    for info in pkgutil.walk_packages(cvpipe.__path__, "cvpipe."):
+        if info.name.startswith(("cvpipe.bench", "cvpipe.commands")):
+            continue
+        module = importlib.import_module(info.name)
+        kernels += [(info.name, k) for k, v in vars(module).items()
+                    if hasattr(v, "py_func") and getattr(v, "__module__", None) == info.name]
+    assert kernels
+    uncached = [f"{m}.{k}" for m, k in kernels
+                if type(getattr(importlib.import_module(m), k)._cache).__name__ == "NullCache"]
+    assert not uncached, f"numba kernels without cache=True: {uncached}"
+
+
 # ------------------------------------------------------------------------------------------------ help examples
 
 
