@@ -229,6 +229,20 @@ def test_pictures_have_the_input_size(workdir, tmp_path, capsys):
     assert np.array_equal(pic[far], S[far])
 
 
+def test_inspect_overlay_per_probe(workdir, tmp_path, capsys):
+    s = workdir / "data" / "samples" / "defect"
+    probes = [str(s / "probes" / "probe_00.png"), str(s / "probes" / "probe_01.png")]
+    one = _run_json(["inspect", str(s / "reference.png"), probes[0], "--overlay", str(tmp_path / "r.png"), "--json"],
+                    capsys)
+    assert one[0]["overlay"] == str(tmp_path / "r.png")
+    assert cv2.imread(one[0]["overlay"]).shape == cv2.imread(probes[0]).shape
+    two = _run_json(["inspect", str(s / "reference.png"), *probes, "--overlay", str(tmp_path / "dir") + "/", "--json"],
+                    capsys)
+    assert [r["overlay"] for r in two] == [str(tmp_path / "dir" / "probe_00_regions.png"),
+                                           str(tmp_path / "dir" / "probe_01_regions.png")]
+    assert all(cv2.imread(r["overlay"]) is not None for r in two)
+
+
 def test_stereo_png_output_is_the_picture(workdir, tmp_path, capsys):
     s = workdir / "data" / "samples" / "stereo"
     res = _run_json(["stereo", str(s / "left.png"), str(s / "right.png"), "--max-disp", "64", "--method",

@@ -124,6 +124,21 @@ def compile_note(task: str, *modules) -> None:
         note(f"compiling the {task} kernels once, about {seconds:.0f} s (cached for the next runs)")
 
 
+def overlay_paths(inputs: list[str], overlay: str | None, suffix: str) -> list[str | None]:
+    """Where each input's picture goes: ``overlay`` itself for one input (unless it ends in a slash), else
+    ``overlay/<input stem><suffix>.png`` (numbered when two inputs share a stem); None each without ``--overlay``."""
+    from pathlib import Path
+
+    if not overlay:
+        return [None] * len(inputs)
+    if len(inputs) == 1 and not overlay.endswith(("/", os.sep)):
+        return [overlay]
+    stems = [Path(s).stem for s in inputs]
+    # inputs with one stem from different folders must not overwrite each other's picture
+    names = [f"{k:03d}_{st}" if stems.count(st) > 1 else st for k, st in enumerate(stems)]
+    return [str(Path(overlay) / f"{n}{suffix}.png") for n in names]
+
+
 def with_flags(message: str, names: Iterable[str]) -> str:
     """``message`` with each parameter name in ``names`` (``min_inliers``) spelt as its flag (``--min-inliers``).
 

@@ -11,7 +11,7 @@ from types import SimpleNamespace
 from typing import TYPE_CHECKING
 
 from ..params import DefectDiffParams, DefectFeaturesParams, DefectRegionParams, DefectRegisterParams
-from . import compile_note, progress, with_flags
+from . import compile_note, overlay_paths, progress, with_flags
 
 if TYPE_CHECKING:
     from .. import defects
@@ -41,6 +41,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"smallest defect kept, px (default {_DEFAULTS.regions.min_area})")
     parser.add_argument("--pad", type=float, default=_DEFAULTS.regions.pad,
                         help=f"pad the probe boxes by this many px (default {_DEFAULTS.regions.pad:g})")
+    parser.add_argument("--overlay", metavar="PNG",
+                        help="write the probe with its defect boxes; with several probes PNG is a folder "
+                             "(<probe>_regions.png)")
     parser.add_argument("--ecc-levels", type=int, default=_DEFAULTS.register.ecc_levels,
                         help=f"pyramid levels of the ECC refinement (default {_DEFAULTS.register.ecc_levels})")
     parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
@@ -80,7 +83,8 @@ def run(args: argparse.Namespace) -> int:
     ref_gray = io.to_gray(reference)
     ref_feats = detect(ref_gray, params.features.detector, params.features.max_features)
     results, failed = [], 0
-    for path in progress(args.probes, "inspect"):
+    for path, picture in progress(list(zip(args.probes, overlay_paths(args.probes, args.overlay, "_regions"))),
+                                  "inspect"):
         try:
             probe = io.read_image(path, "color")
             r = defects.inspect(ref_gray, io.to_gray(probe), params, reference_features=ref_feats)
@@ -97,6 +101,9 @@ def run(args: argparse.Namespace) -> int:
             io.save_image(Path(args.out) / f"{stem}_regions.png", defects.draw_regions(probe, r.probe_regions))
             io.save_image(Path(args.out) / f"{stem}_diff.png", defects.heat_map(r.difference.diff, r.threshold))
             results[-1]["overlay"] = str(Path(args.out) / f"{stem}_regions.png")
+        if picture:
+            io.save_image(picture, defects.draw_regions(probe, r.probe_regions))
+            results[-1]["overlay"] = picture
     if args.out:
         io.save_json(Path(args.out) / "inspect.json", results)
     if args.json:

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..params import LogoFeaturesParams, LogoMatchParams, LogoVerifyParams
-from . import compile_note, progress, step
+from . import compile_note, overlay_paths, progress, step
 
 if TYPE_CHECKING:
     from .. import logos
@@ -126,18 +126,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              '"quad", "logos": [every brand found, best first], "overlay"})')
 
 
-def overlay_paths(scenes: list[str], overlay: str | None) -> list[str | None]:
-    """Where each scene's picture goes: ``overlay`` itself for one scene, ``overlay/<stem>_logo.png`` for several."""
-    if not overlay:
-        return [None] * len(scenes)
-    if len(scenes) == 1 and not overlay.endswith(("/", "\\")):
-        return [overlay]
-    stems = [Path(s).stem for s in scenes]
-    # scenes with one stem from different folders must not overwrite each other's picture
-    names = [f"{k:03d}_{st}" if stems.count(st) > 1 else st for k, st in enumerate(stems)]
-    return [str(Path(overlay) / f"{n}_logo.png") for n in names]
-
-
 def run(args: argparse.Namespace) -> int:
     from .. import io, logos
     from ..errors import CvpipeError, InputError
@@ -159,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
     with step(f"gallery ({args.method})"):
         gallery = load_gallery(args.gallery, args.method, args.max_features, mp)
     records, failed = [], 0
-    for scene, picture in progress(list(zip(args.scenes, overlay_paths(args.scenes, args.overlay))), "logo"):
+    for scene, picture in progress(list(zip(args.scenes, overlay_paths(args.scenes, args.overlay, "_logo"))), "logo"):
         try:
             with step(scene):
                 gray = io.read_image(scene, "gray")  # as before: a JPEG decoded to gray is not cvtColor's gray
