@@ -331,7 +331,8 @@ def test_inspect_command_reports_failures_and_keeps_the_other_results(reference,
     assert len(err) == 1 and err[0].startswith("cvpipe: error:") and "blank.png: registration failed" in err[0]
     records = json.loads(captured.out)
     assert [r["verdict"] for r in records] == ["faulty", None]
-    assert set(records[0]) == {"probe", "verdict", "score", "regions", "H"} and len(records[0]["regions"]) == 1
+    assert set(records[0]) == {"probe", "verdict", "score", "regions", "H", "overlay"} and len(records[0]["regions"]) == 1
+    assert records[0]["overlay"] == str(out / "faulty_regions.png")  # the JSON names the picture written
     assert "registration failed" in records[1]["error"]
     assert (out / "faulty_regions.png").is_file() and (out / "faulty_diff.png").is_file()
     assert json.loads((out / "inspect.json").read_text()) == records

@@ -7,25 +7,33 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
+from typing import TYPE_CHECKING
 
-import cv2
-import numpy as np
-
-from .. import depth as depth_mod
-from .. import io, rectify, stereo
-from ..errors import InputError
 from ..params import StereoBmParams, StereoSgbmParams, StereoSgmParams
+from . import compile_note, step
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from .. import rectify
 
 HELP = ("disparity map of a stereo pair (float32 .npy of the LEFT image, NaN = invalid), rectified first with "
         "--rectify; depth and a point cloud with --calib")
-EXAMPLE = "cvpipe stereo data/samples/stereo/left.png data/samples/stereo/right.png --max-disp 64 -o disp.npy --json"
+EXAMPLE = ("cvpipe stereo data/samples/stereo/left.png data/samples/stereo/right.png --max-disp 64 -o disp.npy "
+           "--overlay disp.png --json")
 
-#: command-line method name -> (cvpipe.stereo.METHODS key, params dataclass whose defaults the command uses)
+#: ``--method`` (params.yaml's spelling, the keys of cvpipe.stereo.METHODS) -> the params dataclass whose defaults
+#: the command uses; ``opencv-sgbm`` with a hyphen is accepted too
 CLI_METHODS = {
-    "sgm": ("sgm", StereoSgmParams),
-    "opencv-sgbm": ("opencv_sgbm", StereoSgbmParams),
-    "opencv-bm": ("opencv_bm", StereoBmParams),
+    "sgm": StereoSgmParams,
+    "opencv_sgbm": StereoSgbmParams,
+    "opencv_bm": StereoBmParams,
 }
+
+
+def method_name(text: str) -> str:
+    """A method name in params.yaml's spelling: ``opencv-sgbm`` and ``opencv_sgbm`` are the same method."""
+    return text.strip().lower().replace("-", "_")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -34,8 +42,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-disp", type=_max_disp_arg, required=True,
                         help="number of disparities searched, 0 .. N-1 (like OpenCV's numDisparities), or `auto`: "
                              "estimated from the (rectified) feature matches")
-    parser.add_argument("--method", choices=sorted(CLI_METHODS), default="sgm",
-                        help="our semi-global matching (default) or an OpenCV baseline")
+    parser.add_argument("--method", type=method_name, choices=tuple(CLI_METHODS), default="sgm",
+                        help="our semi-global matching (default) or an OpenCV baseline (opencv-sgbm also accepted)")
     parser.add_argument("-o", "--out", required=True,
                         help="output .npy: (H, W) float32 disparity, NaN = invalid; or .png: a colour-mapped picture")
     parser.add_argument("--rectify", action="store_true",
@@ -45,6 +53,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--depth", help="depth output (needs --calib): .npy float32 in the baseline's unit, "
                                         "NaN = invalid; or .png picture")
     parser.add_argument("--ply", help="coloured point cloud of the valid pixels, binary PLY (needs --calib)")
+    parser.add_argument("--overlay", metavar="PNG", help="write the colour-mapped disparity with a colour bar (px)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the RANSAC sampling (--rectify)")
     parser.add_argument("--json", action="store_true",
                         help='print {"valid_fraction", "max_disp", "disparity_only", ...; with --rectify "H_left", '
@@ -56,6 +65,11 @@ def _read(path: str) -> np.ndarray:
 
     16-bit (and float) images are scaled to 8 bits as :func:`cvpipe.io.read_image` does for the other commands.
     """
+    import cv2
+    import numpy as np
+
+    from .. import io
+
     img = io.read_image(path, mode="unchanged")
     if img.dtype != np.uint8:
         img = cv2.convertScaleAbs(img, alpha=255.0 / float(np.iinfo(img.dtype).max)) if img.dtype.kind in "ui" \
@@ -64,8 +78,14 @@ def _read(path: str) -> np.ndarray:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from .. import depth as depth_mod
+    from .. import io, stereo
+    from ..errors import InputError
+
     for flag, path, kinds in (("`-o`", args.out, (".npy", ".png")), ("`--depth`", args.depth, (".npy", ".png")),
-                              ("`--ply`", args.ply, (".ply",))):
+                              ("`--ply`", args.ply, (".ply",)), ("`--overlay`", args.overlay, (".png",))):
         if path is not None:
             io.check_output_path(path, flag, kinds)
     left, right = _read(args.left), _read(args.right)
@@ -74,11 +94,17 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("`--depth` and `--ply` need `--calib FILE` (focal length and baseline)")
     info, geometry, left, right, auto_disp = _prepare(args, left, right, calib)
     max_disp = auto_disp if args.max_disp == "auto" else args.max_disp
-    method, params_cls = CLI_METHODS[args.method]
+    method, params_cls = args.method, CLI_METHODS[args.method]
     options = dataclasses.asdict(params_cls())
-    disp = stereo.compute_disparity(left, right, max_disp, method, **options)
+    if method == "sgm":
+        compile_note("stereo", stereo)
+    with step(f"disparity ({method})"):
+        disp = stereo.compute_disparity(left, right, max_disp, method, **options)
     _save_map(args.out, disp.astype(np.float32), 0.0, float(max_disp), "px", "disparity")
-    out = {"valid_fraction": float(np.isfinite(disp).mean()), "max_disp": int(max_disp), **info}
+    out = {"valid_fraction": float(np.isfinite(disp).mean()), "max_disp": int(max_disp), "out": args.out, **info}
+    if args.overlay:
+        _save_map(args.overlay, disp.astype(np.float32), 0.0, float(max_disp), "px", "disparity")
+        out["overlay"] = args.overlay
     if geometry is not None:
         z = depth_mod.depth_from_disparity(disp, geometry.focal, geometry.baseline, geometry.doffs)
         out.update({"depth_unit": geometry.unit, "focal_px": geometry.focal, "baseline": geometry.baseline,
@@ -111,6 +137,9 @@ def _max_disp_arg(text: str):
 
 
 def _read_calib(path: str) -> rectify.Calibration:
+    from .. import rectify
+    from ..errors import InputError
+
     try:
         text = open(path, encoding="utf-8").read()
     except FileNotFoundError:
@@ -122,6 +151,9 @@ def _read_calib(path: str) -> rectify.Calibration:
 
 def _prepare(args, left, right, calib):
     """Rectify when asked; returns (JSON fields, depth geometry or None, left, right, auto max_disp)."""
+    from .. import io, rectify
+    from ..errors import InputError
+
     if left.shape[:2] != right.shape[:2]:
         raise InputError(f"{args.right}: size {right.shape[1]}x{right.shape[0]} differs from the left image's "
                          f"{left.shape[1]}x{left.shape[0]}")
@@ -160,6 +192,11 @@ def _prepare(args, left, right, calib):
 
 def _save_map(path: str, values: np.ndarray, lo, hi, unit: str, label: str) -> None:
     """.npy: the float32 array; .png: the colour-mapped picture with its colour bar."""
+    import numpy as np
+
+    from .. import depth as depth_mod
+    from .. import io
+
     if path.lower().endswith(".png"):
         io.save_image(path, depth_mod.colorize(values, lo, hi, unit=unit, label=label))
         return
