@@ -29,6 +29,7 @@ COMMANDS = {
     "logo": "logo",
     "hough": "hough",
     "inspect": "inspect",
+    "defect": "inspect",  # the task's name (params.yaml, dvc.yaml, outputs): an alias of `inspect`
     "homography": "homography",
     "stereo": "stereo",
     "stitch": "stitch",

@@ -376,6 +376,23 @@ SECTIONS.update({
 })
 
 
+@dataclass(frozen=True)
+class InspectParams:
+    """Every parameter of ``cvpipe.defect.inspect``: the ``defect.<field>`` sections above, one per stage."""
+
+    features: DefectFeaturesParams = dataclasses.field(default_factory=DefectFeaturesParams)
+    match: MatchParams = dataclasses.field(default_factory=MatchParams)
+    register: DefectRegisterParams = dataclasses.field(default_factory=DefectRegisterParams)
+    diff: DefectDiffParams = dataclasses.field(default_factory=DefectDiffParams)
+    regions: DefectRegionParams = dataclasses.field(default_factory=DefectRegionParams)
+
+
+def load_inspect_params(path: str | os.PathLike = "params.yaml") -> InspectParams:
+    """The ``defect.*`` sections of ``params.yaml`` as one :class:`InspectParams`."""
+    return InspectParams(**{f.name: load_section(SECTIONS[f"defect.{f.name}"], f"defect.{f.name}", path)
+                            for f in dataclasses.fields(InspectParams)})
+
+
 # ---------------------------------------------------------------------------------------------------- panorama
 
 

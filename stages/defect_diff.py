@@ -4,7 +4,7 @@ differences.json (photometric fit per probe, probes dropped so far)."""
 
 from pathlib import Path
 
-from cvpipe import datasets, defects, io
+from cvpipe import datasets, defect, io
 from cvpipe.errors import EstimationError
 from stages._runner import Stage, run
 
@@ -19,7 +19,7 @@ def defect_diff(st: Stage) -> None:
         z = io.load_npz(reg_dir / f"{name}.npz")
         try:
             with st.timer("difference"):
-                d = defects.difference(ref, z["warped"], z["valid"], p)
+                d = defect.difference(ref, z["warped"], z["valid"], p)
         except EstimationError as exc:
             st.drop(rec["file"], str(exc))
             continue
@@ -27,7 +27,7 @@ def defect_diff(st: Stage) -> None:
         if "alt_H" in z:
             try:
                 with st.timer("difference"):
-                    alt = defects.difference(ref, z["alt_warped"], z["alt_valid"], p)
+                    alt = defect.difference(ref, z["alt_warped"], z["alt_valid"], p)
             except EstimationError as exc:  # only a second opinion: the probe goes on without it
                 fit["alternative_error"] = str(exc)
             else:

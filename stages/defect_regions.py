@@ -1,5 +1,5 @@
 """Stage `defect_regions`: threshold, morphology and components of every difference map -> regions and a verdict
-per probe; where `defect_register` made a direct alternative, the one ``defects.choose`` keeps (as `cvpipe inspect`).
+per probe; where `defect_register` made a direct alternative, the one ``defect.choose`` keeps (as `cvpipe inspect`).
 
 results.json holds one record per probe, as `cvpipe inspect --json` prints them (``probe``, ``verdict``, ``score``,
 ``regions`` in probe pixels, ``H``) plus the regions in reference pixels, the threshold and the registration used;
@@ -8,8 +8,8 @@ a probe dropped by an earlier stage has ``verdict: null`` and its reason in ``er
 
 from pathlib import Path
 
-from cvpipe import defects, io
-from cvpipe.defects import Difference
+from cvpipe import defect, io
+from cvpipe.defect import Difference
 from stages._runner import Stage, run
 
 
@@ -22,10 +22,10 @@ def defect_regions(st: Stage) -> None:
         reg = registration[name]
         z = io.load_npz(Path(a.diff) / f"{name}.npz")
         with st.timer("regions"):
-            first = defects.find_regions(Difference.from_arrays(z), reg["primary"]["H"], reg["probe_shape"], p)
-            alt = (defects.find_regions(Difference.from_arrays(z, "alt_"), reg["alternative"]["H"],
+            first = defect.find_regions(Difference.from_arrays(z), reg["primary"]["H"], reg["probe_shape"], p)
+            alt = (defect.find_regions(Difference.from_arrays(z, "alt_"), reg["alternative"]["H"],
                                         reg["probe_shape"], p) if "alt_diff" in z else None)
-        chosen = "alternative" if defects.choose(first, alt) is alt else "primary"
+        chosen = "alternative" if defect.choose(first, alt) is alt else "primary"
         r = alt if chosen == "alternative" else first
         results.append({"probe": reg["file"], "verdict": r.verdict, "score": r.score, "regions": r.probe_regions,
                         "reference_regions": r.regions, "region_scores": r.region_scores, "threshold": r.threshold,

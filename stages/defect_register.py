@@ -3,14 +3,14 @@ and the registration's quality (method, matches, inliers, ECC correlation); no d
 
 When the registration came from keypoints (and `direct_fallback` is on), the direct alignment (phase correlation +
 ECC) is registered too: `defect_regions` keeps it instead when the keypoint one makes the probe faulty and the
-direct one leaves a lower score (``defects.choose``, as `cvpipe inspect` does). A probe that cannot be registered
+direct one leaves a lower score (``defect.choose``, as `cvpipe inspect` does). A probe that cannot be registered
 is dropped with its reason (registration.json, `dropped`) and reported "not inspected".
 """
 
 from dataclasses import asdict
 from pathlib import Path
 
-from cvpipe import datasets, defects, io
+from cvpipe import datasets, defect, io
 from cvpipe.errors import CvpipeError, EstimationError
 from cvpipe.features import Features
 from stages._runner import Stage, run
@@ -28,23 +28,23 @@ def defect_register(st: Stage) -> None:
             prb = io.read_image(probe.path, "gray")
             feats = Features.from_arrays(io.load_npz(Path(a.features) / "probes" / f"{probe.name}.npz"))
             with st.timer("register"):
-                reg = defects.register(ref, prb, p, reference_features=ref_feats, probe_features=feats,
-                                       matches=io.load_npz(Path(a.matches) / f"{probe.name}.npz")["index"])
+                reg = defect.register_probe(ref, prb, p, reference_features=ref_feats, probe_features=feats,
+                                            matches=io.load_npz(Path(a.matches) / f"{probe.name}.npz")["index"])
         except CvpipeError as exc:
             st.drop(probe.path.name, str(exc))
             continue
         rec = {"file": probe.path.name, "probe_shape": prb.shape, "primary": asdict(reg), "alternative": None}
-        warped, valid = defects.warp_probe(prb, reg.H, ref.shape)
+        warped, valid = defect.warp_probe(prb, reg.H, ref.shape)
         arrays = {"H": reg.H, "warped": warped, "valid": valid}
-        if defects.wants_alternative(reg, p):
+        if defect.wants_alternative(reg, p):
             try:
                 with st.timer("direct_alternative"):
-                    alt = defects.register_direct(ref, prb, p, matches=reg.matches, inliers=reg.inliers)
+                    alt = defect.register_direct(ref, prb, p, matches=reg.matches, inliers=reg.inliers)
             except EstimationError as exc:
                 rec["alternative_error"] = str(exc)
             else:
                 rec["alternative"] = asdict(alt)
-                warped, valid = defects.warp_probe(prb, alt.H, ref.shape)
+                warped, valid = defect.warp_probe(prb, alt.H, ref.shape)
                 arrays.update(alt_H=alt.H, alt_warped=warped, alt_valid=valid)
         io.save_npz(out / f"{probe.name}.npz", probe_shape=prb.shape, **arrays)
         records[probe.name] = rec

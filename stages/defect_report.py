@@ -4,7 +4,8 @@ times are in the stages' uncached timings). Truth (truth.json in `defect.data`) 
 
 from pathlib import Path
 
-from cvpipe import datasets, defects, defects_report as rep, io
+from cvpipe import datasets, io
+from cvpipe.defect import report as rep
 from cvpipe.errors import InputError
 from stages._runner import Stage, run
 
@@ -33,7 +34,7 @@ def defect_report(st: Stage) -> None:
         overlays.append(over)
         if r["verdict"] is not None:
             z = io.load_npz(Path(a.diff) / f"{Path(name).stem}.npz")
-            heat = defects.heat_map(z["alt_diff" if r["registration"] == "alternative" else "diff"], r["threshold"])
+            heat = rep.heat_map(z["alt_diff" if r["registration"] == "alternative" else "diff"], r["threshold"])
             heats.append(rep.caption(heat, f"{name}: score {r['score']:.0f}"))
     pictures = []
     for key, images, caption in (

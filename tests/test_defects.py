@@ -1,4 +1,4 @@
-"""cvpipe.defects: inserted defects are found where they were put, perfect probes stay perfect through
+"""cvpipe.defect: inserted defects are found where they were put, perfect probes stay perfect through
 misalignment, lighting and noise, and probes that cannot be registered are errors, not verdicts."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cvpipe import cli, defects, io
+from cvpipe import cli, defect, io
 from cvpipe.errors import EstimationError, InputError
 from cvpipe.metrics import DetectionCounts, box_iou, corner_error, match_boxes
 from cvpipe.params import DefectDiffParams, DefectRegionParams, DefectRegisterParams
@@ -70,13 +70,13 @@ def test_inserted_defect_is_found_where_it_was_put(reference):
     ref_box = np.array([[200 - 10, 120 - 9, 200 + 10, 120 + 9]], float)
     H = motion(2.5, 1.03, (6.0, -9.0), (1e-5, -1e-5))
     probe = make_probe(part, H, seed=1)
-    r = defects.inspect(reference, probe)
+    r = defect.inspect(reference, probe)
     assert r.verdict == "faulty"
     assert len(r.regions) == 1, r.regions
     # The tolerant difference trims up to `tolerance_radius` (3 px) off each side of a ~20 px blob, so the region
     # is a shrunken copy of the truth: IoU >= 0.4 still means "the same place" (DeepPCB counts a hit at 0.33).
     assert box_iou(r.regions, ref_box)[0, 0] >= 0.4
-    assert box_iou(r.probe_regions, defects.map_boxes(ref_box, H))[0, 0] >= 0.4
+    assert box_iou(r.probe_regions, defect.map_boxes(ref_box, H))[0, 0] >= 0.4
     # registration: ECC refinement lands well under the 3 px tolerance (corner error over the whole frame)
     assert corner_error(r.registration.H, H, SIZE, SIZE) < 0.5
     assert r.score > 0
@@ -89,35 +89,35 @@ def test_the_steps_one_by_one_give_what_inspect_gives(reference):
     cv2.circle(part, (90, 90), 7, (230, 230, 230), -1, cv2.LINE_AA)
     for probe in (make_probe(part, motion(-2.0, 1.02, (4.0, 7.0)), seed=9),
                   make_probe(reference, motion(1.0, 0.98, (-6.0, 3.0)), seed=10)):
-        r = defects.inspect(reference, probe)
+        r = defect.inspect(reference, probe)
         ref, prb = io.to_gray(reference), io.to_gray(probe)
-        reg = defects.register(ref, prb)
+        reg = defect.register_probe(ref, prb)
         found = []
-        for g in [reg] + ([defects.register_direct(ref, prb, matches=reg.matches, inliers=reg.inliers)]
-                          if defects.wants_alternative(reg) else []):
-            d = defects.difference(ref, *defects.warp_probe(prb, g.H, ref.shape))
-            d = defects.Difference.from_arrays(d.to_arrays("alt_"), "alt_")  # as stored between the stages
-            found.append(defects.find_regions(d, g.H, prb.shape))
-        chosen = defects.choose(found[0], found[1] if len(found) > 1 else None)
+        for g in [reg] + ([defect.register_direct(ref, prb, matches=reg.matches, inliers=reg.inliers)]
+                          if defect.wants_alternative(reg) else []):
+            d = defect.difference(ref, *defect.warp_probe(prb, g.H, ref.shape))
+            d = defect.Difference.from_arrays(d.to_arrays("alt_"), "alt_")  # as stored between the stages
+            found.append(defect.find_regions(d, g.H, prb.shape))
+        chosen = defect.choose(found[0], found[1] if len(found) > 1 else None)
         assert (chosen.verdict, chosen.score) == (r.verdict, r.score)
         assert np.array_equal(chosen.probe_regions, r.probe_regions)
-        H = reg.H if chosen is found[0] else defects.register_direct(ref, prb).H
+        H = reg.H if chosen is found[0] else defect.register_direct(ref, prb).H
         assert np.array_equal(H, r.registration.H)
 
 
 def test_choose_keeps_the_first_unless_a_faulty_one_has_a_lower_scoring_alternative():
     def result(verdict, score):
-        return defects.Inspection(verdict, score, np.zeros((0, 4)), np.zeros((0, 4)), np.zeros(0), 10.0)
+        return defect.Inspection(verdict, score, np.zeros((0, 4)), np.zeros((0, 4)), np.zeros(0), 10.0)
 
     faulty, lower, higher = result("faulty", 50.0), result("faulty", 20.0), result("faulty", 80.0)
     perfect = result("perfect", 0.0)
-    assert defects.choose(faulty, lower) is lower and defects.choose(faulty, perfect) is perfect
-    assert defects.choose(faulty, higher) is faulty and defects.choose(faulty, None) is faulty
-    assert defects.choose(perfect, result("perfect", 0.0)) is perfect  # a perfect probe never asks
-    reg = defects.Registration(np.eye(3), np.eye(3), 50, 40, 0.99, "features")
-    assert defects.wants_alternative(reg)
-    assert not defects.wants_alternative(reg, DefectRegisterParams(direct_fallback=False))
-    assert not defects.wants_alternative(replace(reg, method="direct"))
+    assert defect.choose(faulty, lower) is lower and defect.choose(faulty, perfect) is perfect
+    assert defect.choose(faulty, higher) is faulty and defect.choose(faulty, None) is faulty
+    assert defect.choose(perfect, result("perfect", 0.0)) is perfect  # a perfect probe never asks
+    reg = defect.ProbeRegistration(np.eye(3), np.eye(3), 50, 40, 0.99, "features")
+    assert defect.wants_alternative(reg)
+    assert not defect.wants_alternative(reg, DefectRegisterParams(direct_fallback=False))
+    assert not defect.wants_alternative(replace(reg, method="direct"))
 
 
 @pytest.mark.parametrize("seed, rot, shift, gain, bias", [
@@ -128,7 +128,7 @@ def test_choose_keeps_the_first_unless_a_faulty_one_has_a_lower_scoring_alternat
 def test_perfect_probe_with_misalignment_lighting_and_noise_is_perfect(reference, seed, rot, shift, gain, bias):
     H = motion(rot, 0.96 if seed % 2 else 1.04, shift, (2e-5, 1e-5))
     probe = make_probe(reference, H, seed, gain=gain, bias=bias, noise=3.0)
-    r = defects.inspect(reference, probe)
+    r = defect.inspect(reference, probe)
     assert r.verdict == "perfect" and len(r.regions) == 0 and r.score == 0.0
     assert corner_error(r.registration.H, H, SIZE, SIZE) < 0.5
     # the fitted photometric model undoes the lighting change (blur and noise keep it from being exact)
@@ -139,8 +139,8 @@ def test_difference_tolerates_a_shift_up_to_the_radius():
     ref = board(11)[..., 1]
     shifted = np.roll(ref, 2, axis=1)
     valid = np.ones(ref.shape, bool)
-    tolerant = defects.difference(ref, shifted, valid, DefectDiffParams(tolerance_radius=3))
-    plain = defects.difference(ref, shifted, valid, DefectDiffParams(tolerance_radius=0))
+    tolerant = defect.difference(ref, shifted, valid, DefectDiffParams(tolerance_radius=3))
+    plain = defect.difference(ref, shifted, valid, DefectDiffParams(tolerance_radius=0))
     # a 2 px shift of edges of ~90 grey levels: the plain difference sees them, the tolerant one (r = 3) does not
     # (a few grey levels remain from smoothing the rolled-in column)
     assert plain.diff.max() > 40
@@ -152,7 +152,7 @@ def test_gain_bias_fit_ignores_outliers():
     ref = rng.uniform(0, 255, (200, 200))
     warped = 0.7 * ref + 25 + rng.normal(0, 1, ref.shape)
     warped[50:90, 50:90] = 255  # a defect must not pull the fit
-    gain, bias, sigma = defects.fit_gain_bias(ref, warped, np.ones(ref.shape, bool))
+    gain, bias, sigma = defect.fit_gain_bias(ref, warped, np.ones(ref.shape, bool))
     assert gain == pytest.approx(0.7, abs=0.01) and bias == pytest.approx(25, abs=1.5) and sigma < 2.5
 
 
@@ -161,25 +161,25 @@ def test_gain_bias_fit_ignores_outliers():
 
 def test_unrelated_probe_is_a_registration_error(reference):
     with pytest.raises(EstimationError, match="registration failed"):
-        defects.inspect(reference, make_probe(board(99), np.eye(3), seed=5))
+        defect.inspect(reference, make_probe(board(99), np.eye(3), seed=5))
 
 
 def test_blank_probe_is_a_registration_error(reference):
     with pytest.raises(EstimationError, match="registration failed: the probe is blank"):
-        defects.inspect(reference, np.full((SIZE, SIZE), 128, np.uint8))
+        defect.inspect(reference, np.full((SIZE, SIZE), 128, np.uint8))
 
 
 def test_wildly_different_size_is_an_input_error(reference):
     small = cv2.resize(reference, (SIZE // 4, SIZE // 4), interpolation=cv2.INTER_AREA)
     with pytest.raises(InputError, match=r"registration failed: probe is 80x80 .* factor 4\.00"):
-        defects.inspect(reference, small)
+        defect.inspect(reference, small)
 
 
 def test_probe_barely_overlapping_is_a_registration_error(reference):
     p = DefectRegisterParams(min_overlap=0.99)
     probe = make_probe(reference, motion(0, 1.0, (60.0, 0.0)), seed=6)
     with pytest.raises(EstimationError, match=r"covers only \d+% of the reference"):
-        defects.register(reference, probe, p)
+        defect.register_probe(reference, probe, p)
 
 
 # --------------------------------------------------------------------------------------------- validation
@@ -208,24 +208,24 @@ def test_params_validation(cls, kwargs, message):
 
 def test_image_validation(reference):
     with pytest.raises(InputError, match=r"`probe` must be a \(H, W\) or \(H, W, 3\) uint8 image.*float64"):
-        defects.inspect(reference, np.zeros((64, 64)))
+        defect.inspect(reference, np.zeros((64, 64)))
     with pytest.raises(InputError, match=r"`reference` must be at least 16x16 pixels, got 8x8"):
-        defects.inspect(np.zeros((8, 8), np.uint8), reference)
+        defect.inspect(np.zeros((8, 8), np.uint8), reference)
     with pytest.raises(InputError, match="must have one shape"):
-        defects.difference(reference[..., 0], reference[:100, :100, 0], np.ones((100, 100), bool))
+        defect.difference(reference[..., 0], reference[:100, :100, 0], np.ones((100, 100), bool))
     with pytest.raises(InputError, match="`H` must be a finite invertible 3x3 matrix"):
-        defects.map_boxes([[0, 0, 1, 1]], np.zeros((3, 3)))
+        defect.map_boxes([[0, 0, 1, 1]], np.zeros((3, 3)))
 
 
 def test_gain_bias_fit_refuses_what_it_cannot_fit():
     flat = np.full((50, 50), 100.0)
     with pytest.raises(EstimationError, match="the reference is flat over the overlap"):
-        defects.fit_gain_bias(flat, flat, np.ones(flat.shape, bool))
+        defect.fit_gain_bias(flat, flat, np.ones(flat.shape, bool))
     ramp = np.tile(np.arange(50.0), (50, 1))
     with pytest.raises(EstimationError, match="gain -1.00 against the reference"):
-        defects.fit_gain_bias(ramp, 255 - ramp, np.ones(ramp.shape, bool))
+        defect.fit_gain_bias(ramp, 255 - ramp, np.ones(ramp.shape, bool))
     with pytest.raises(EstimationError, match="only 4 overlapping pixels"):
-        defects.fit_gain_bias(ramp, ramp, np.pad(np.ones((2, 2), bool), 24))
+        defect.fit_gain_bias(ramp, ramp, np.pad(np.ones((2, 2), bool), 24))
 
 
 # --------------------------------------------------------------------------------------------- regions and metrics
@@ -233,11 +233,11 @@ def test_gain_bias_fit_refuses_what_it_cannot_fit():
 
 def test_merge_boxes_joins_only_near_boxes():
     boxes = np.array([[0, 0, 10, 10], [14, 0, 20, 10], [60, 60, 70, 70]], float)
-    merged, scores = defects.merge_boxes(boxes, np.array([1.0, 2.0, 4.0]), 5.0)
+    merged, scores = defect.merge_boxes(boxes, np.array([1.0, 2.0, 4.0]), 5.0)
     order = np.argsort(merged[:, 0])
     assert merged[order].tolist() == [[0, 0, 20, 10], [60, 60, 70, 70]]
     assert scores[order].tolist() == [3.0, 4.0]
-    assert len(defects.merge_boxes(boxes, np.ones(3), -1)[0]) == 3
+    assert len(defect.merge_boxes(boxes, np.ones(3), -1)[0]) == 3
 
 
 def test_box_iou_and_matching():
@@ -264,16 +264,16 @@ def test_evaluate_counts_errors_and_false_alarms():
     results = [{"probe": "x/a.png", "verdict": "faulty", "regions": [[1, 1, 10, 10]]},
                {"probe": "b.png", "verdict": "faulty", "regions": [[50, 50, 60, 60]]},
                {"probe": "c.png", "verdict": None, "regions": [], "error": "registration failed"}]
-    m = defects.evaluate(results, truth)
+    m = defect.evaluate(results, truth)
     assert m["accuracy"] == pytest.approx(1 / 3) and m["errors"] == 1
     assert m["faulty_flagged"] == 1.0 and m["false_alarm_rate"] == 1.0
     assert (m["tp"], m["fp"], m["fn"]) == (1, 1, 0)
     with pytest.raises(InputError, match="no inspection result for probe d.png"):
-        defects.evaluate(results, truth + [{"file": "d.png", "verdict": "perfect", "boxes": []}])
+        defect.evaluate(results, truth + [{"file": "d.png", "verdict": "perfect", "boxes": []}])
 
 
 def test_report_metrics_are_numbers_per_probe_and_score_only_probes_with_truth():
-    from cvpipe import defects_report as rep
+    from cvpipe.defect import report as rep
 
     records = [{"probe": "a.png", "verdict": "faulty", "score": 40.0, "regions": [[10, 10, 30, 30]],
                 "H": np.eye(3).tolist(), "method": "features"},
@@ -302,7 +302,7 @@ def test_report_metrics_are_numbers_per_probe_and_score_only_probes_with_truth()
 
 
 def test_montage_keeps_each_picture_whole_in_its_tile():
-    from cvpipe import defects_report as rep
+    from cvpipe.defect import report as rep
 
     wide = np.full((50, 200, 3), 255, np.uint8)
     out = rep.montage([wide, wide, wide], cols=2, width=400)
@@ -377,14 +377,14 @@ def test_deeppcb_pair_warped_both_ways(data_root):
     ref = io.read_image(pair["template"], "gray")
     rng = np.random.default_rng([20261122, 0])
     probe, H, boxes = deeppcb_probe(io.read_image(pair["test"], "gray"), pair["boxes"], rng)
-    params = replace(defects.InspectParams(), regions=replace(DefectRegionParams(), pad=9.0))
-    r = defects.inspect(ref, probe, params)
+    params = replace(defect.InspectParams(), regions=replace(DefectRegionParams(), pad=9.0))
+    r = defect.inspect(ref, probe, params)
     assert r.verdict == "faulty"
     # this pair has 10 annotated defects; at DeepPCB's IoU 0.33 at least 8 must be found with at most 2 extras
     counts = match_boxes(r.probe_regions, boxes, 0.33)[0]
     assert counts.tp >= 0.8 * len(boxes) and counts.fp <= 2
     perfect, _, _ = deeppcb_probe(ref, np.zeros((0, 4)), rng)
-    assert defects.inspect(ref, perfect, params).verdict == "perfect"
+    assert defect.inspect(ref, perfect, params).verdict == "perfect"
 
 
 # --------------------------------------------------------------------------------------------- DVC stages
@@ -433,17 +433,17 @@ def test_stages_give_inspect_results_drop_the_unregistrable_probe_and_rerun_iden
     io.save_image(folder / "reference.png", reference)
     for name, img in probes.items():
         io.save_image(folder / "probes" / name, img)
-    true_box = defects.map_boxes([[190, 111, 210, 129]], H_faulty)
+    true_box = defect.map_boxes([[190, 111, 210, 129]], H_faulty)
     io.save_json(folder / "truth.json", {"probes": [
         {"file": "faulty.png", "verdict": "faulty", "boxes": true_box, "H": H_faulty},
         {"file": "perfect.png", "verdict": "perfect", "boxes": [], "H": H_perfect}]})  # blank.png: no truth
     o = _run_stages(root, folder, tmp_path, root / "params.yaml")
 
-    params = defects.load_inspect_params(root / "params.yaml")
+    params = defect.load_inspect_params(root / "params.yaml")
     records = {r["probe"]: r for r in json.loads((o / "results.json").read_text())}
     for name in ("faulty.png", "perfect.png"):  # the stage chain is inspect(), step by step
         # read as the stages read them (the decoder's grey conversion can differ from cv2.cvtColor by 1 level)
-        r = defects.inspect(io.read_image(folder / "reference.png", "gray"),
+        r = defect.inspect(io.read_image(folder / "reference.png", "gray"),
                             io.read_image(folder / "probes" / name, "gray"), params)
         rec = records[name]
         assert (rec["verdict"], rec["score"]) == (r.verdict, r.score)
@@ -484,3 +484,14 @@ def test_stages_give_inspect_results_drop_the_unregistrable_probe_and_rerun_iden
     assert json.loads((o / "plots" / "confusion.json").read_text()) == []
     summary = json.loads((o / "summary.json").read_text())
     assert "no ground truth" in summary["description"]
+
+
+def test_defect_is_an_alias_of_inspect():
+    """`cvpipe defect` (the task's name) parses to the same options and runs the same function as `cvpipe inspect`."""
+    from cvpipe.commands import inspect as command
+
+    parser = cli.build_parser()
+    a, b = (vars(parser.parse_args([verb, "ref.png", "p.png", "--tolerance", "2"])) for verb in ("inspect", "defect"))
+    assert a.pop("_run") is b.pop("_run") is command.run
+    assert (a.pop("command"), b.pop("command")) == ("inspect", "defect")
+    assert a == b and a["tolerance"] == 2

@@ -3,7 +3,7 @@
 DeepPCB's pairs are pixel-aligned, binarised and every test image is faulty. Each pair therefore yields two probes:
 the test image (faulty) and the template itself (perfect), each warped by its own seeded small random homography
 (rotation up to 4 degrees, scale +-5 %, translation up to 15 px, slight perspective) with a gain/bias change, blur and
-noise. The ground-truth boxes are mapped by the same homography. Ours (:func:`cvpipe.defects.inspect`) is compared
+noise. The ground-truth boxes are mapped by the same homography. Ours (:func:`cvpipe.defect.inspect`) is compared
 in the same process with the seed's method (SIFT + OpenCV RANSAC homography, plain absolute difference, fixed
 threshold, connected components).
 """
@@ -21,11 +21,12 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from .. import defects, io
+from .. import defect, io
 from ..errors import CvpipeError, InputError
 from ..features import detect
 from ..matching import match
 from ..metrics import DetectionCounts, match_boxes
+from ..params import InspectParams
 
 HELP = "defect inspection on DeepPCB pairs warped by random homographies (ours vs the seed's plain difference)"
 EXAMPLE = "cvpipe bench defect --data ../shared/data --limit 20"
@@ -112,7 +113,7 @@ def make_probe(img: np.ndarray, boxes: np.ndarray, rng: np.random.Generator) -> 
     out = cv2.GaussianBlur(out, (0, 0), sigma)
     out = out + rng.normal(0, rng.uniform(2, 5), out.shape)
     probe = np.clip(np.rint(out), 0, 255).astype(np.uint8)
-    mapped = defects.map_boxes(boxes, H)
+    mapped = defect.map_boxes(boxes, H)
     clipped = mapped.copy()
     clipped[:, [0, 2]] = clipped[:, [0, 2]].clip(0, w)
     clipped[:, [1, 3]] = clipped[:, [1, 3]].clip(0, h)
@@ -142,7 +143,7 @@ def seed_method(reference: np.ndarray, probe: np.ndarray, ref_feats, threshold: 
     mask = (cv2.absdiff(reference, warped) > threshold).astype(np.uint8)
     n, _, stats, _ = cv2.connectedComponentsWithStats(mask)
     boxes = [[x, y, x + w, y + h] for x, y, w, h, a in stats[1:] if a >= min_area]
-    return defects.map_boxes(np.array(boxes, float).reshape(-1, 4), H)
+    return defect.map_boxes(np.array(boxes, float).reshape(-1, 4), H)
 
 
 # --------------------------------------------------------------------------------------------------- run
@@ -161,7 +162,7 @@ def _score(counts: dict, verdicts: list[tuple[str, str]]) -> dict:
     }
 
 
-def evaluate(pairs: list[dict], seed: int, params: defects.InspectParams, baseline: bool = True,
+def evaluate(pairs: list[dict], seed: int, params: InspectParams, baseline: bool = True,
              progress: bool | None = None) -> dict:
     """Run ours (and the seed's method) on both probes of every pair; return metrics and timings."""
     pad = params.regions.pad
@@ -183,7 +184,7 @@ def evaluate(pairs: list[dict], seed: int, params: defects.InspectParams, baseli
             probe, H, gt = make_probe(src, boxes, rng)
             t0 = time.perf_counter()
             try:
-                r = defects.inspect(ref, probe, params, reference_features=fr)
+                r = defect.inspect(ref, probe, params, reference_features=fr)
                 times["ours"].append(time.perf_counter() - t0)
                 n_direct += r.registration.method == "direct"
                 verdicts["ours"].append((truth_verdict, r.verdict))
@@ -191,7 +192,7 @@ def evaluate(pairs: list[dict], seed: int, params: defects.InspectParams, baseli
                 counts["ours"] += c
                 records.append({"pair": pair["name"], "probe": truth_verdict, "verdict": r.verdict, "tp": c.tp,
                                 "fp": c.fp, "fn": c.fn, "registration": r.registration.method})
-                tight_boxes = defects.find_regions(r.difference, r.registration.H, probe.shape, tight).probe_regions
+                tight_boxes = defect.find_regions(r.difference, r.registration.H, probe.shape, tight).probe_regions
                 verdicts["ours_tight_boxes"].append((truth_verdict, r.verdict))
                 counts["ours_tight_boxes"] += match_boxes(tight_boxes, gt, IOU)[0]
             except CvpipeError as exc:
@@ -237,8 +238,8 @@ def run(args: argparse.Namespace) -> int:
     cv2.setRNGSeed(args.seed)
     # warm-up: the first call pays for lazy initialisation (FLANN, OpenCV's thread pool)
     warm = io.read_image(pairs[0]["template"], "gray")
-    defects.inspect(warm, warm)
-    params = defects.InspectParams()
+    defect.inspect(warm, warm)
+    params = InspectParams()
     feats = replace(params.features, **{k: v for k, v in (("detector", args.detector),
                                                            ("max_features", args.max_features)) if v is not None})
     params = replace(params, features=feats, regions=replace(params.regions, pad=args.pad))

@@ -7,21 +7,19 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from types import SimpleNamespace
 from typing import TYPE_CHECKING
 
-from ..params import DefectDiffParams, DefectFeaturesParams, DefectRegionParams, DefectRegisterParams
+from ..params import InspectParams
 from . import compile_note, overlay_paths, progress, with_flags
 
 if TYPE_CHECKING:
-    from .. import defects
+    from .. import defect as defects
 
 HELP = "judge probe images faulty or perfect against a golden reference and outline the defects"
 EXAMPLE = "cvpipe inspect data/samples/defect/reference.png data/samples/defect/probes/*.png --out out/ --json"
 
-#: the defaults of defects.InspectParams (the same dataclasses), without importing the algorithm module
-_DEFAULTS = SimpleNamespace(features=DefectFeaturesParams(), diff=DefectDiffParams(), regions=DefectRegionParams(),
-                            register=DefectRegisterParams())
+#: the defaults of ``cvpipe.defect.inspect``, without importing the algorithm package
+_DEFAULTS = InspectParams()
 #: ``--detector`` choices: the keys of ``cvpipe.features.DETECTORS`` (a test keeps them equal)
 DETECTORS = ("akaze", "brisk", "orb", "sift")
 
@@ -50,11 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
 
 
-def params_from_args(args: argparse.Namespace) -> defects.InspectParams:
+def params_from_args(args: argparse.Namespace) -> InspectParams:
     """The inspection parameters: the dataclass defaults with the command-line overrides (validated there)."""
-    from .. import defects
-
-    p = defects.InspectParams()
+    p = InspectParams()
     try:
         return replace(p, features=replace(p.features, detector=args.detector),
                        diff=replace(p.diff, tolerance_radius=args.tolerance),
@@ -97,7 +93,7 @@ def overlay_stems(probes: list[str]) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .. import defects, homography, io
+    from .. import defect as defects, homography, io
     from ..errors import CvpipeError, EstimationError, InputError
     from ..features import detect
 

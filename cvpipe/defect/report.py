@@ -1,5 +1,6 @@
-"""The defect task's report: metrics, ``dvc plots`` rows, pictures and the report page's summary, from the records of
-the ``defect_regions`` stage (one per probe, as ``cvpipe inspect --json`` prints them) and the optional truth.
+"""The defect task's pictures and report: the regions and heat-map pictures, scores of inspection records against
+ground truth, metrics, ``dvc plots`` rows and the report page's summary, from the records of the ``defect_regions``
+stage (one per probe, as ``cvpipe inspect --json`` prints them) and the optional truth.
 
 Pure functions: records and arrays in, dicts and images out (the ``defect_report`` stage reads and writes).
 A record with ``verdict`` None is a probe that was not inspected (``error`` says why). ``truth`` maps a probe's file
@@ -16,13 +17,90 @@ from typing import Any, Mapping
 import cv2
 import numpy as np
 
-from .defects import evaluate
-from .metrics import box_iou, corner_error
+from ..errors import InputError
+from ..io import to_bgr
+from ..metrics import DetectionCounts, box_iou, corner_error, match_boxes
 
 #: a region matches a true box at this IoU (DeepPCB's criterion, also used by ``cvpipe bench defect``)
 IOU = 0.33
 NO_TRUTH = "no ground truth"
 NOT_INSPECTED = "not inspected"
+
+
+def draw_regions(image: np.ndarray, regions: np.ndarray, truth: np.ndarray | None = None,
+                 thickness: int = 2) -> np.ndarray:
+    """A BGR copy of ``image`` with ``regions`` outlined in red and optional ``truth`` boxes in green.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) uint8
+    regions, truth : (K, 4)
+        Boxes ``[x1, y1, x2, y2]`` in the image's pixels.
+    """
+    out = to_bgr(np.asarray(image)).copy()  # drawn on: never the caller's array
+    for boxes, color in ((truth, (0, 200, 0)), (regions, (0, 0, 255))):
+        if boxes is None:
+            continue
+        for x1, y1, x2, y2 in np.asarray(boxes, np.float64).reshape(-1, 4):
+            cv2.rectangle(out, (int(round(x1)), int(round(y1))), (int(round(x2)), int(round(y2))), color,
+                          thickness)
+    return out
+
+
+def heat_map(diff: np.ndarray, threshold: float) -> np.ndarray:
+    """BGR heat map of a difference image; the colour scale saturates at twice ``threshold``.
+
+    Parameters
+    ----------
+    diff : (H, W) float
+        Difference in grey levels (:attr:`Difference.diff`).
+    threshold : float
+        The extent threshold (:attr:`Inspection.threshold`), which lands in the middle of the scale.
+    """
+    scale = 255.0 / max(2.0 * float(threshold), 1e-6)
+    return cv2.applyColorMap(np.clip(np.asarray(diff, np.float32) * scale, 0, 255).astype(np.uint8),
+                             cv2.COLORMAP_INFERNO)
+
+
+def evaluate(results: list[dict], truth: list[dict], iou: float = IOU) -> dict:
+    """Image- and defect-level scores of inspection records against ground truth.
+
+    Parameters
+    ----------
+    results : list of dict
+        Records as ``cvpipe inspect --json`` prints them (``probe``, ``verdict`` or None with ``error``,
+        ``regions`` in probe pixels), matched to ``truth`` by the file name of ``probe``.
+    truth : list of dict
+        ``{"file", "verdict", "boxes"}`` per probe (the samples' truth.json layout).
+    iou : float
+        A region matches a true box at IoU >= ``iou`` (one-to-one, greedy).
+
+    Returns
+    -------
+    dict
+        ``accuracy`` (errors count as wrong), ``faulty_flagged``, ``false_alarm_rate`` (perfect probes judged
+        faulty or not registered), ``errors``, defect-level ``precision``, ``recall``, ``f1`` and the counts.
+    """
+    by_name = {PurePath(r["probe"]).name: r for r in results}
+    counts, right, flagged, alarms, errors = DetectionCounts(0, 0, 0), 0, [], [], 0
+    for t in truth:
+        r = by_name.get(t["file"])
+        if r is None:
+            raise InputError(f"no inspection result for probe {t['file']}")
+        verdict = r.get("verdict")
+        errors += verdict is None
+        right += verdict == t["verdict"]
+        (flagged if t["verdict"] == "faulty" else alarms).append(
+            verdict == "faulty" if t["verdict"] == "faulty" else verdict != "perfect")
+        regions = r.get("regions")
+        counts += match_boxes(np.asarray([] if regions is None else regions, float).reshape(-1, 4),
+                              np.asarray(t["boxes"], float).reshape(-1, 4), iou)[0]
+    n = len(truth)
+    return {"probes": n, "accuracy": right / n if n else None, "errors": errors,
+            "faulty_flagged": float(np.mean(flagged)) if flagged else None,
+            "false_alarm_rate": float(np.mean(alarms)) if alarms else None,
+            "precision": counts.precision, "recall": counts.recall, "f1": counts.f1,
+            "tp": counts.tp, "fp": counts.fp, "fn": counts.fn, "iou": iou}
 
 
 def _key(file: str) -> str:
@@ -67,7 +145,7 @@ def evaluate_records(records: list[dict], truth: Mapping[str, Mapping[str, Any]]
     dict
         ``probes``, ``inspected``, ``faulty``, ``perfect``, ``direct_registrations``, ``truth_probes``;
         ``per_probe`` (file -> :func:`probe_truth_scores`, probes with truth only); with truth also ``overall``:
-        :func:`cvpipe.defects.evaluate` at IoU :data:`IOU` over the probes with truth (a probe not inspected counts
+        :func:`evaluate` at IoU :data:`IOU` over the probes with truth (a probe not inspected counts
         as wrong) plus the median registration corner error.
     """
     inspected = [r for r in records if r.get("verdict") is not None]
@@ -136,8 +214,6 @@ def score_rows(records: list[dict]) -> list[dict]:
 
 def overlay(probe: np.ndarray, record: Mapping[str, Any], truth: Mapping[str, Any] | None) -> np.ndarray:
     """The probe (BGR) with the found regions in red, the true boxes in green and a caption line."""
-    from .defects import draw_regions
-
     out = draw_regions(probe, np.asarray(record.get("regions") or [], float).reshape(-1, 4),
                        None if truth is None else truth["boxes"])
     text = f"{PurePath(record['probe']).name}: {record.get('verdict') or NOT_INSPECTED}"
