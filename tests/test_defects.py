@@ -495,3 +495,26 @@ def test_defect_is_an_alias_of_inspect():
     assert a.pop("_run") is b.pop("_run") is command.run
     assert (a.pop("command"), b.pop("command")) == ("inspect", "defect")
     assert a == b and a["tolerance"] == 2
+
+
+PACKAGE_MODULES = ["cvpipe.defect", "cvpipe.defect.register", "cvpipe.defect.diff", "cvpipe.defect.regions",
+                   "cvpipe.defect.report"]
+
+
+@pytest.mark.parametrize("name", PACKAGE_MODULES)
+def test_docstring_examples_run(name):
+    """The Examples sections are doctests, and they hold (each is a small check on known input)."""
+    import doctest
+    import importlib
+
+    failed, attempted = doctest.testmod(importlib.import_module(name), optionflags=doctest.NORMALIZE_WHITESPACE)
+    assert attempted > 0 and failed == 0
+
+
+def test_every_public_function_of_the_package_has_an_example():
+    import inspect as pyinspect
+
+    functions = [n for n in defect.__all__ if pyinspect.isfunction(getattr(defect, n))
+                 and getattr(defect, n).__module__.startswith("cvpipe.defect")]
+    assert "inspect" in functions and "register_probe" in functions
+    assert [n for n in functions if "Examples\n" not in getattr(defect, n).__doc__] == []

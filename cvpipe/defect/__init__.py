@@ -57,6 +57,18 @@ def compare(reference: np.ndarray, warped: np.ndarray, valid: np.ndarray, regist
     -------
     Inspection
         With ``registration`` and ``difference`` filled in.
+
+    Examples
+    --------
+    >>> import cv2, numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> ref = cv2.resize((rng.random((16, 16)) > 0.5).astype(np.uint8) * 160 + 50, (160, 160),
+    ...                  interpolation=cv2.INTER_NEAREST)  # a random pattern of 10 px blocks
+    >>> probe = cv2.warpAffine(ref, np.float32([[1, 0, 3], [0, 1, -2]]), (160, 160),
+    ...                        borderMode=cv2.BORDER_REFLECT)  # the part moved by (+3, -2) px
+    >>> reg = register_probe(ref, probe)
+    >>> compare(ref, *warp_probe(probe, reg.H, ref.shape), reg, probe.shape).verdict
+    'perfect'
     """
     d = difference(reference, warped, valid, diff)
     return replace(find_regions(d, registration.H, probe_shape, regions), registration=registration)
@@ -86,6 +98,20 @@ def inspect(reference: np.ndarray, probe: np.ndarray, params: InspectParams | No
     ------
     InputError, EstimationError
         When the probe cannot be registered (see :func:`register_probe`); no verdict is given then.
+
+    Examples
+    --------
+    >>> import cv2, numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> ref = cv2.resize((rng.random((16, 16)) > 0.5).astype(np.uint8) * 160 + 50, (160, 160),
+    ...                  interpolation=cv2.INTER_NEAREST)  # a random pattern of 10 px blocks
+    >>> probe = cv2.warpAffine(ref, np.float32([[1, 0, 3], [0, 1, -2]]), (160, 160),
+    ...                        borderMode=cv2.BORDER_REFLECT)  # the part moved by (+3, -2) px
+    >>> probe[70:82, 40:52] = 255 - probe[70:82, 40:52]  # a defect, in probe pixels
+    >>> r = inspect(ref, probe)
+    >>> x1, y1, x2, y2 = r.probe_regions[0]
+    >>> r.verdict, len(r.regions), bool(x1 <= 40 and y1 <= 70 and x2 >= 52 and y2 >= 82)
+    ('faulty', 1, True)
     """
     p = params or InspectParams()
     ref, prb = check_gray("reference", reference), check_gray("probe", probe)

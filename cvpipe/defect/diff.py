@@ -71,6 +71,14 @@ def fit_gain_bias(reference: np.ndarray, warped: np.ndarray, valid: np.ndarray, 
     -------
     gain, bias, sigma : float
         ``sigma`` is the robust residual standard deviation in grey levels (plus 0.5 for quantisation).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ref = np.tile(np.arange(0, 200, 2, dtype=np.float32), (100, 1))
+    >>> gain, bias, sigma = fit_gain_bias(ref, 0.8 * ref + 20, np.ones(ref.shape, bool))
+    >>> round(gain, 3), round(bias, 3)
+    (0.8, 20.0)
     """
     step = max(1, int(np.sqrt(valid.size / max_samples)))
     v = valid[::step, ::step]
@@ -115,6 +123,18 @@ def difference(reference: np.ndarray, warped: np.ndarray, valid: np.ndarray,
     valid : (H, W) bool
         Reference pixels covered by the probe.
     params : DefectDiffParams, optional
+
+    Examples
+    --------
+    >>> import cv2, numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> ref = cv2.resize((rng.random((16, 16)) > 0.5).astype(np.uint8) * 160 + 50, (160, 160),
+    ...                  interpolation=cv2.INTER_NEAREST)
+    >>> warped = np.roll(ref, 1, axis=1)  # misregistered by one pixel
+    >>> warped[60:70, 60:70] = 0  # and a defect, darker than any reference pixel (50 or 210)
+    >>> d = difference(ref, warped, np.ones(ref.shape, bool))
+    >>> bool(d.diff[62:68, 62:68].min() > 40), bool(d.diff[:, :50].max() < 1)  # the shift alone leaves ~nothing
+    (True, True)
     """
     p = params or DefectDiffParams()
     reference, warped = check_gray("reference", reference), check_gray("warped", warped)

@@ -47,7 +47,14 @@ class Inspection:
 
 
 def map_boxes(boxes: np.ndarray, H: np.ndarray) -> np.ndarray:
-    """Axis-aligned bounds of boxes ``[x1, y1, x2, y2]`` (K, 4) after mapping their corners by ``H``."""
+    """Axis-aligned bounds of boxes ``[x1, y1, x2, y2]`` (K, 4) after mapping their corners by ``H``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> map_boxes([[0, 0, 10, 10]], np.diag([2.0, 2.0, 1.0])).tolist()
+    [[0.0, 0.0, 20.0, 20.0]]
+    """
     boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
     if len(boxes) == 0:
         return boxes.copy()
@@ -71,6 +78,12 @@ def merge_boxes(boxes: np.ndarray, scores: np.ndarray, distance: float) -> tuple
     distance : float
         Largest gap, in pixels, between two boxes that are merged; 0 merges only overlapping or touching boxes,
         a negative value merges nothing.
+
+    Examples
+    --------
+    >>> boxes, scores = merge_boxes([[0, 0, 10, 10], [12, 0, 20, 10], [50, 50, 60, 60]], [1.0, 2.0, 4.0], 5.0)
+    >>> boxes.tolist(), scores.tolist()  # the first two are 2 px apart: one box
+    ([[50.0, 50.0, 60.0, 60.0], [0.0, 0.0, 20.0, 10.0]], [4.0, 3.0])
     """
     boxes, scores = np.array(boxes, np.float64).reshape(-1, 4), np.array(scores, np.float64).reshape(-1)
     if distance < 0:
@@ -110,6 +123,16 @@ def find_regions(diff: Difference, H: np.ndarray, probe_shape: tuple[int, int],
     probe_shape : (h, w)
         Probe size; mapped boxes are clipped to it.
     params : DefectRegionParams, optional
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> diff = np.zeros((100, 100), np.float32)
+    >>> diff[40:50, 20:35] = 80  # grey levels, against a contrast of 200: thresholds 30 (extent) and 60 (seed)
+    >>> d = Difference(diff, np.ones(diff.shape, bool), gain=1.0, bias=0.0, noise=1.0, contrast=200.0)
+    >>> r = find_regions(d, np.eye(3), (100, 100))
+    >>> r.verdict, r.regions.tolist()
+    ('faulty', [[20.0, 40.0, 35.0, 50.0]])
     """
     p = params or DefectRegionParams()
     H = check_homography(H)
@@ -164,6 +187,15 @@ def choose(first: Inspection, alternative: Inspection | None) -> Inspection:
     alternative : Inspection or None
         The comparison after :func:`register_direct`'s registration, when :func:`wants_alternative` and it
         succeeded.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> def result(verdict, score):
+    ...     return Inspection(verdict, score, np.zeros((0, 4)), np.zeros((0, 4)), np.zeros(0), 10.0)
+    >>> first, alternative = result("faulty", 40.0), result("perfect", 0.0)
+    >>> choose(first, alternative) is alternative, choose(first, None) is first
+    (True, True)
     """
     if alternative is not None and first.verdict == "faulty" and alternative.score < first.score:
         return alternative

@@ -128,6 +128,18 @@ def register_probe(reference: np.ndarray, probe: np.ndarray, params: DefectRegis
         ProbeRegistration failed: too few keypoints (blank probe), too few consistent matches (unrelated scene), a
         homography that shrinks/magnifies beyond ``max_scale_change`` or barely overlaps, or an alignment whose
         correlation stays below ``min_correlation``. The message says which and what to tune.
+
+    Examples
+    --------
+    >>> import cv2, numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> ref = cv2.resize((rng.random((16, 16)) > 0.5).astype(np.uint8) * 160 + 50, (160, 160),
+    ...                  interpolation=cv2.INTER_NEAREST)  # a random pattern of 10 px blocks
+    >>> probe = cv2.warpAffine(ref, np.float32([[1, 0, 3], [0, 1, -2]]), (160, 160),
+    ...                        borderMode=cv2.BORDER_REFLECT)  # the part moved by (+3, -2) px
+    >>> reg = register_probe(ref, probe)
+    >>> reg.method, bool(np.allclose(reg.H[:2, 2], [3, -2], atol=0.5))  # the shift, within half a pixel
+    ('features', True)
     """
     p = params or DefectRegisterParams()
     fp, mp = features or DefectFeaturesParams(), matching or MatchParams()
@@ -264,6 +276,14 @@ def warp_to_reference(probe: np.ndarray, H: np.ndarray, reference_shape: tuple[i
     H : (3, 3)
         Reference -> probe.
     reference_shape : (H, W)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> probe = np.tile(np.arange(20, dtype=np.uint8) * 10, (20, 1))  # grey level = 10 x column
+    >>> H = np.array([[1.0, 0, 2], [0, 1, 0], [0, 0, 1]])  # reference (x, y) -> probe (x + 2, y)
+    >>> warp_to_reference(probe, H, (20, 20))[0, [0, 1, 17, 18]].tolist()
+    [20, 30, 190, 0]
     """
     H = check_homography(H)
     rh, rw = reference_shape[:2]
@@ -294,6 +314,18 @@ def register_direct(reference: np.ndarray, probe: np.ndarray, params: DefectRegi
     ------
     EstimationError
         ECC did not converge or its result fails the geometry or correlation checks of :func:`register_probe`.
+
+    Examples
+    --------
+    >>> import cv2, numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> ref = cv2.resize((rng.random((16, 16)) > 0.5).astype(np.uint8) * 160 + 50, (160, 160),
+    ...                  interpolation=cv2.INTER_NEAREST)  # a random pattern of 10 px blocks
+    >>> probe = cv2.warpAffine(ref, np.float32([[1, 0, 3], [0, 1, -2]]), (160, 160),
+    ...                        borderMode=cv2.BORDER_REFLECT)  # the part moved by (+3, -2) px
+    >>> reg = register_direct(ref, probe)
+    >>> reg.method, bool(np.allclose(reg.H[:2, 2], [3, -2], atol=0.5))
+    ('direct', True)
     """
     p = params or DefectRegisterParams()
     ref, prb = check_gray("reference", reference), check_gray("probe", probe)
@@ -305,6 +337,13 @@ def wants_alternative(registration: ProbeRegistration, params: DefectRegisterPar
 
     On sparse boards the keypoints can lock ECC onto an alignment that is right where most of the copper is and off
     elsewhere; before such a probe is called faulty, the direct alignment is compared as well (:func:`choose`).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> reg = ProbeRegistration(np.eye(3), np.eye(3), matches=50, inliers=40, correlation=0.99, method="features")
+    >>> wants_alternative(reg)
+    True
     """
     return registration.method == "features" and (params or DefectRegisterParams()).direct_fallback
 
@@ -325,6 +364,14 @@ def warp_probe(probe: np.ndarray, H: np.ndarray, reference_shape: tuple[int, int
         :func:`warp_to_reference` of the probe.
     valid : (H, W) bool
         Reference pixels whose whole bilinear footprint lies inside the probe.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> probe = np.full((20, 20), 100, np.uint8)
+    >>> warped, valid = warp_probe(probe, np.array([[1.0, 0, 2], [0, 1, 0], [0, 0, 1]]), (20, 20))
+    >>> int(valid[0].sum())  # columns 18 and 19 of the reference fall outside the probe
+    18
     """
     probe = np.asarray(probe)
     warped = warp_to_reference(probe, H, reference_shape)

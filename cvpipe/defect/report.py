@@ -36,6 +36,13 @@ def draw_regions(image: np.ndarray, regions: np.ndarray, truth: np.ndarray | Non
     image : (H, W) or (H, W, 3) uint8
     regions, truth : (K, 4)
         Boxes ``[x1, y1, x2, y2]`` in the image's pixels.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> out = draw_regions(np.zeros((40, 40), np.uint8), [[5, 5, 20, 20]])
+    >>> out.shape, out[5, 10].tolist()  # on the box's top edge: red (BGR)
+    ((40, 40, 3), [0, 0, 255])
     """
     out = to_bgr(np.asarray(image)).copy()  # drawn on: never the caller's array
     for boxes, color in ((truth, (0, 200, 0)), (regions, (0, 0, 255))):
@@ -56,6 +63,12 @@ def heat_map(diff: np.ndarray, threshold: float) -> np.ndarray:
         Difference in grey levels (:attr:`Difference.diff`).
     threshold : float
         The extent threshold (:attr:`Inspection.threshold`), which lands in the middle of the scale.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> heat_map(np.array([[0.0, 10.0, 40.0]], np.float32), threshold=10.0).shape
+    (1, 3, 3)
     """
     scale = 255.0 / max(2.0 * float(threshold), 1e-6)
     return cv2.applyColorMap(np.clip(np.asarray(diff, np.float32) * scale, 0, 255).astype(np.uint8),
@@ -80,6 +93,16 @@ def evaluate(results: list[dict], truth: list[dict], iou: float = IOU) -> dict:
     dict
         ``accuracy`` (errors count as wrong), ``faulty_flagged``, ``false_alarm_rate`` (perfect probes judged
         faulty or not registered), ``errors``, defect-level ``precision``, ``recall``, ``f1`` and the counts.
+
+    Examples
+    --------
+    >>> results = [{"probe": "in/a.png", "verdict": "faulty", "regions": [[10, 10, 20, 20]]},
+    ...            {"probe": "in/b.png", "verdict": "perfect", "regions": []}]
+    >>> truth = [{"file": "a.png", "verdict": "faulty", "boxes": [[11, 10, 20, 21]]},
+    ...          {"file": "b.png", "verdict": "perfect", "boxes": []}]
+    >>> m = evaluate(results, truth)
+    >>> m["accuracy"], m["recall"], m["false_alarm_rate"]
+    (1.0, 1.0, 0.0)
     """
     by_name = {PurePath(r["probe"]).name: r for r in results}
     counts, right, flagged, alarms, errors = DetectionCounts(0, 0, 0), 0, [], [], 0
@@ -147,6 +170,14 @@ def evaluate_records(records: list[dict], truth: Mapping[str, Mapping[str, Any]]
         ``per_probe`` (file -> :func:`probe_truth_scores`, probes with truth only); with truth also ``overall``:
         :func:`evaluate` at IoU :data:`IOU` over the probes with truth (a probe not inspected counts
         as wrong) plus the median registration corner error.
+
+    Examples
+    --------
+    >>> records = [{"probe": "in/a.png", "verdict": "faulty", "score": 12.5, "regions": [[10, 10, 20, 20]]}]
+    >>> truth = {"a.png": {"verdict": "faulty", "boxes": [[10, 10, 20, 20]], "H": None}}
+    >>> ev = evaluate_records(records, truth, (64, 64))
+    >>> ev["faulty"], ev["overall"]["accuracy"], ev["per_probe"]["a.png"]["box_iou"]
+    (1, 1.0, 1.0)
     """
     inspected = [r for r in records if r.get("verdict") is not None]
     out = {"probes": len(records), "inspected": len(inspected),
@@ -179,6 +210,12 @@ def metrics_of(records: list[dict], evaluated: dict) -> dict:
         The ``defect_regions`` records.
     evaluated : dict
         :func:`evaluate_records` of them.
+
+    Examples
+    --------
+    >>> records = [{"probe": "in/a.png", "verdict": "faulty", "score": 12.5, "regions": [[10, 10, 20, 20]]}]
+    >>> metrics_of(records, evaluate_records(records, {}, (64, 64)))["defect"]["a"]
+    {'inspected': 1, 'score': 12.5, 'faulty': 1, 'regions': 1}
     """
     every = {k: evaluated[k] for k in ("probes", "inspected", "faulty", "perfect", "direct_registrations",
                                       "truth_probes")}
@@ -238,6 +275,12 @@ def montage(images: list[np.ndarray], cols: int, width: int = 1200) -> np.ndarra
         At least one.
     cols : int
         Tiles per row (fewer when there are fewer images).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> montage([np.zeros((10, 20, 3), np.uint8)] * 3, cols=2, width=100).shape  # two rows of two 50 px tiles
+    (100, 100, 3)
     """
     if not images:
         raise ValueError("`images` must hold at least one image")
