@@ -60,14 +60,11 @@ def compare(reference: np.ndarray, warped: np.ndarray, valid: np.ndarray, regist
 
     Examples
     --------
-    >>> import cv2, numpy as np
-    >>> rng = np.random.default_rng(0)
-    >>> ref = cv2.resize((rng.random((16, 16)) > 0.5).astype(np.uint8) * 160 + 50, (160, 160),
-    ...                  interpolation=cv2.INTER_NEAREST)  # a random pattern of 10 px blocks
-    >>> probe = cv2.warpAffine(ref, np.float32([[1, 0, 3], [0, 1, -2]]), (160, 160),
-    ...                        borderMode=cv2.BORDER_REFLECT)  # the part moved by (+3, -2) px
-    >>> reg = register_probe(ref, probe)
-    >>> compare(ref, *warp_probe(probe, reg.H, ref.shape), reg, probe.shape).verdict
+    >>> from cvpipe.samples import make_defect
+    >>> board = make_defect(np.random.default_rng(0), n_faulty=2, n_perfect=1, size=240).images
+    >>> reg = register_probe(board["reference.png"], board["probes/probe_02.png"])
+    >>> warped, valid = warp_probe(board["probes/probe_02.png"], reg.H, (240, 240))
+    >>> compare(board["reference.png"], warped, valid, reg, (240, 240)).verdict
     'perfect'
     """
     d = difference(reference, warped, valid, diff)
@@ -101,17 +98,14 @@ def inspect(reference: np.ndarray, probe: np.ndarray, params: InspectParams | No
 
     Examples
     --------
-    >>> import cv2, numpy as np
-    >>> rng = np.random.default_rng(0)
-    >>> ref = cv2.resize((rng.random((16, 16)) > 0.5).astype(np.uint8) * 160 + 50, (160, 160),
-    ...                  interpolation=cv2.INTER_NEAREST)  # a random pattern of 10 px blocks
-    >>> probe = cv2.warpAffine(ref, np.float32([[1, 0, 3], [0, 1, -2]]), (160, 160),
-    ...                        borderMode=cv2.BORDER_REFLECT)  # the part moved by (+3, -2) px
-    >>> probe[70:82, 40:52] = 255 - probe[70:82, 40:52]  # a defect, in probe pixels
-    >>> r = inspect(ref, probe)
-    >>> x1, y1, x2, y2 = r.probe_regions[0]
-    >>> r.verdict, len(r.regions), bool(x1 <= 40 and y1 <= 70 and x2 >= 52 and y2 >= 82)
-    ('faulty', 1, True)
+    >>> from cvpipe.metrics import box_iou
+    >>> from cvpipe.samples import make_defect
+    >>> board = make_defect(np.random.default_rng(0), n_faulty=2, n_perfect=1, size=240)
+    >>> truth = board.truth["probes"][1]  # probe_01.png: a blob of extra material
+    >>> r = inspect(board.images["reference.png"], board.images["probes/" + truth["file"]])
+    >>> iou = box_iou(r.probe_regions, np.array(truth["boxes"]))  # found x true boxes
+    >>> r.verdict, iou.shape, bool(iou[0, 0] >= 0.33)  # DeepPCB's matching criterion
+    ('faulty', (1, 1), True)
     """
     p = params or InspectParams()
     ref, prb = check_gray("reference", reference), check_gray("probe", probe)

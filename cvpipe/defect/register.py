@@ -131,14 +131,12 @@ def register_probe(reference: np.ndarray, probe: np.ndarray, params: DefectRegis
 
     Examples
     --------
-    >>> import cv2, numpy as np
-    >>> rng = np.random.default_rng(0)
-    >>> ref = cv2.resize((rng.random((16, 16)) > 0.5).astype(np.uint8) * 160 + 50, (160, 160),
-    ...                  interpolation=cv2.INTER_NEAREST)  # a random pattern of 10 px blocks
-    >>> probe = cv2.warpAffine(ref, np.float32([[1, 0, 3], [0, 1, -2]]), (160, 160),
-    ...                        borderMode=cv2.BORDER_REFLECT)  # the part moved by (+3, -2) px
-    >>> reg = register_probe(ref, probe)
-    >>> reg.method, bool(np.allclose(reg.H[:2, 2], [3, -2], atol=0.5))  # the shift, within half a pixel
+    >>> from cvpipe.metrics import corner_error
+    >>> from cvpipe.samples import make_defect
+    >>> board = make_defect(np.random.default_rng(0), n_faulty=2, n_perfect=1, size=240)  # probe_02 is perfect
+    >>> reg = register_probe(board.images["reference.png"], board.images["probes/probe_02.png"])
+    >>> true_H = board.truth["probes"][2]["H"]
+    >>> reg.method, bool(corner_error(reg.H, true_H, 240, 240) < 1.0)  # px, at the reference's corners
     ('features', True)
     """
     p = params or DefectRegisterParams()
@@ -317,14 +315,10 @@ def register_direct(reference: np.ndarray, probe: np.ndarray, params: DefectRegi
 
     Examples
     --------
-    >>> import cv2, numpy as np
-    >>> rng = np.random.default_rng(0)
-    >>> ref = cv2.resize((rng.random((16, 16)) > 0.5).astype(np.uint8) * 160 + 50, (160, 160),
-    ...                  interpolation=cv2.INTER_NEAREST)  # a random pattern of 10 px blocks
-    >>> probe = cv2.warpAffine(ref, np.float32([[1, 0, 3], [0, 1, -2]]), (160, 160),
-    ...                        borderMode=cv2.BORDER_REFLECT)  # the part moved by (+3, -2) px
-    >>> reg = register_direct(ref, probe)
-    >>> reg.method, bool(np.allclose(reg.H[:2, 2], [3, -2], atol=0.5))
+    >>> from cvpipe.samples import make_defect
+    >>> board = make_defect(np.random.default_rng(0), n_faulty=2, n_perfect=1, size=240).images
+    >>> reg = register_direct(board["reference.png"], board["probes/probe_02.png"])
+    >>> reg.method, bool(reg.correlation > 0.9)  # ECC's correlation of the aligned images
     ('direct', True)
     """
     p = params or DefectRegisterParams()
