@@ -13,10 +13,13 @@ import io
 import json
 import os
 import sys
+import warnings
 from types import ModuleType
 
 from . import __version__
-from .errors import CvpipeError
+from .errors import BudgetWarning, CvpipeError
+
+_SHOW_WARNING = warnings.showwarning
 
 #: subcommand name -> module under ``cvpipe.commands`` (the order is the order of ``cvpipe --help``)
 COMMANDS = {
@@ -112,6 +115,14 @@ def _classify(exc: BaseException) -> tuple[str, str | None, int]:
     return f"internal error ({type(exc).__name__}: {exc}); set CVPIPE_DEBUG=1 for the traceback", None, 1
 
 
+def _note(message, category, filename, lineno, file=None, line=None) -> None:
+    """Our own warnings (work scaled down to fit the memory budget) as one ``cvpipe: note:`` line on stderr."""
+    if issubclass(category, BudgetWarning):
+        print(f"cvpipe: note: {message}", file=sys.stderr)
+    else:
+        _SHOW_WARNING(message, category, filename, lineno, file, line)
+
+
 def _fail(message: str, file: str | None, code: int, json_mode: bool) -> int:
     """Print the one stderr line and, in ``--json`` mode, the one JSON record; return the exit status."""
     line = " ".join(str(message).split()) or "failed"
@@ -157,6 +168,7 @@ def main(argv: list[str] | None = None) -> int:
     json_mode = "--json" in args_list
     debug = os.environ.get("CVPIPE_DEBUG", "") not in ("", "0")
     try:
+        warnings.showwarning = _note
         parser = build_parser()
         args, code = _parse(parser, args_list, json_mode)
         if args is None:

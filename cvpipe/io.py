@@ -225,7 +225,8 @@ def check_output_path(path: str | os.PathLike, what: str = "output", suffixes: I
         allowed = tuple(suffixes)
         if dest.suffix.lower() not in allowed:
             got = dest.suffix or "no suffix"
-            raise InputError(f"{dest}: {what} must end in one of {', '.join(allowed)}, got {got}", file=str(dest))
+            one = allowed[0] if len(allowed) == 1 else f"one of {', '.join(allowed)}"
+            raise InputError(f"{what} must end in {one}, got {dest} ({got})", file=str(dest))
     parent = dest.parent
     while not parent.exists() and parent != parent.parent:
         parent = parent.parent

@@ -46,7 +46,7 @@ def _read(path: str) -> np.ndarray:
 
 
 def run(args: argparse.Namespace) -> int:
-    io.check_output_path(args.out, "`-o`", (".npy",))
+    io.check_output_path(args.out, "`--out`", (".npy",))
     left, right = _read(args.left), _read(args.right)
     method, params_cls = CLI_METHODS[args.method]
     options = dataclasses.asdict(params_cls())
