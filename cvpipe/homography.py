@@ -1156,6 +1156,11 @@ def chance_probability(H: np.ndarray, src: np.ndarray, dst: np.ndarray, threshol
     return max(p_uniform, hits / (len(rows) * (n - 1.0)))
 
 
+def _distinct(pts: np.ndarray) -> int:
+    """Number of distinct rows of an (N, 2) point array."""
+    return int(len(np.unique(pts, axis=0))) if len(pts) else 0
+
+
 def points_area(pts: np.ndarray) -> float:
     """Area in px^2 of the axis-aligned bounding box of ``pts`` (N, 2), at least 1 px on each side."""
     span = np.ptp(np.asarray(pts, np.float64), axis=0) + 1.0
@@ -1196,12 +1201,17 @@ def check_significant(fit: HomographyFit, src, dst, threshold: float, area: floa
         ``NFA >= MAX_NFA``: as many inliers are expected from unrelated matches; the message has the counts.
     """
     s, d = _as_points("src", src), _as_points("dst", dst)
-    k, n = fit.num_inliers, len(s)
+    inl = np.asarray(fit.inliers, bool)
+    # evidence counts distinct points: many matches to one keypoint (or SIFT's copies of a keypoint with several
+    # orientations) are one observation, and a model that squeezes a row of sources onto one point gains nothing
+    k = min(_distinct(s[inl]), _distinct(d[inl]))
+    n = min(_distinct(s), _distinct(d))
     p = chance_probability(fit.H, s, d, threshold, area)
     lnfa = log10_nfa(k, n, p)
     if not lnfa < math.log10(MAX_NFA):
         raise EstimationError(
-            f"the best homography has {k} inliers of {n} matches within {float(threshold):g} px, which is chance "
+            f"the best homography has {k} distinct inliers of {n} distinct matches ({fit.num_inliers} of {len(s)} "
+            f"in all) within {float(threshold):g} px, which is chance "
             f"level (an unrelated match is an inlier with probability {p:.2g}; NFA 10^{lnfa:.1f} >= {MAX_NFA:g}): "
             "the images do not seem to show the same plane; check that they overlap, or try another --detector "
             "or more features"

@@ -110,12 +110,10 @@ def run(args: argparse.Namespace) -> int:
     code = max((e.exit_code for e in errors), default=0)
     if len(errors) == len(results):
         # nothing to report: the failure itself is the one line (and the one JSON record)
-        if len(errors) == 1:
-            raise errors[0]
-        exc = (InputError if code == 2 else EstimationError)(
-            f"none of the {len(errors)} probes could be inspected against {args.reference}; first: "
-            f"{results[0]['error']}", file=errors[0].file)
-        raise exc
+        first = results[0]["error"]
+        more = f" ({len(errors)} probes failed; first: {first})" if len(errors) > 1 else f": {first}"
+        raise (InputError if code == 2 else EstimationError)(
+            f"no probe could be registered to {args.reference}{more}", file=errors[0].file)
     for res in results:
         if "error" in res:
             print(f"cvpipe: error: {res['error']}", file=sys.stderr)
