@@ -39,9 +39,12 @@ def _header_size(path: Path, data: bytes) -> tuple[int, int] | None:
     Image.MAX_IMAGE_PIXELS = None  # our own limit applies, with our own message
     try:
         import io as _io
+        import warnings
 
-        with Image.open(_io.BytesIO(data)) as im:
-            return im.size
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # Pillow's complaints about corrupt metadata: our own checks follow
+            with Image.open(_io.BytesIO(data)) as im:
+                return im.size
     except Exception:
         return None
 
