@@ -46,6 +46,7 @@ def main() -> None:
     ref_sift = detect(ref_gray, "sift", 4000)  # the seed's registration features
     overlays, heats, seed_records, times, reg_err = [], [], [], {"ours": [], "seed": []}, []
     for t in truth:
+        io.safe_name(t["file"], "truth.json: probe file")
         probe = io.read_image(images / "probes" / t["file"], "color")
         r = results[t["file"]]
         over = defects.draw_regions(probe, r["regions"], t["boxes"])

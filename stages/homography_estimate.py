@@ -34,6 +34,7 @@ def main() -> None:
                 pass
             break
     for q in tqdm(pairs, desc=f"estimate {args.method}", disable=None):
+        io.safe_name(q["name"], f"{args.truth}: pair name")
         m = loaded[q["name"]]
         t0 = time.perf_counter()
         try:

@@ -19,6 +19,7 @@ def main() -> None:
     feats_dir, out = Path(args.features), Path(args.out)
     counts = {}
     for pair in io.progress(io.load_json(args.truth)["pairs"], "match"):
+        io.safe_name(pair["name"], f"{args.truth}: pair name")
         fa = Features.from_arrays(io.load_npz(feats_dir / Path(pair["a"]).with_suffix(".npz")))
         fb = Features.from_arrays(io.load_npz(feats_dir / Path(pair["b"]).with_suffix(".npz")))
         idx = matching.match(fa.descriptors, fb.descriptors, p.ratio, p.cross_check, fa.binary)

@@ -28,6 +28,7 @@ def main() -> None:
     metrics, per_pair = summarize_methods(truth, runs, p.success_px)
     out, pictures = Path(args.out), []
     for q in truth:
+        io.safe_name(q["name"], f"{args.truth}: pair name")
         a = io.read_image(Path(args.images) / q["a"], "color")
         b = io.read_image(Path(args.images) / q["b"], "color")
         panels = {"truth": q["H"]}
