@@ -125,11 +125,8 @@ def _note(message, category, filename, lineno, file=None, line=None) -> None:
 
 def _fail(message: str, file: str | None, code: int, json_mode: bool) -> int:
     """Print the one stderr line and, in ``--json`` mode, the one JSON record; return the exit status."""
-    line = " ".join(str(message).split()) or "failed"
-    if not line.startswith("interrupted"):
-        print(f"cvpipe: error: {line}", file=sys.stderr)
-    else:
-        print("cvpipe: error: interrupted", file=sys.stderr)
+    line = " ".join(str(message).split()) or "failed"  # one line, whatever the message holds
+    print(f"cvpipe: error: {line}", file=sys.stderr)
     if json_mode:
         print(json.dumps({"error": line, "file": file, "exit": code}, sort_keys=True))
     sys.stdout.flush()
@@ -167,8 +164,9 @@ def main(argv: list[str] | None = None) -> int:
     args_list = sys.argv[1:] if argv is None else list(argv)
     json_mode = "--json" in args_list
     debug = os.environ.get("CVPIPE_DEBUG", "") not in ("", "0")
+    shown = warnings.showwarning
+    warnings.showwarning = _note
     try:
-        warnings.showwarning = _note
         parser = build_parser()
         args, code = _parse(parser, args_list, json_mode)
         if args is None:
@@ -185,6 +183,8 @@ def main(argv: list[str] | None = None) -> int:
             return 141
         message, file, code = _classify(exc)
         return _fail(message, file, code, json_mode)
+    finally:
+        warnings.showwarning = shown
 
 
 if __name__ == "__main__":

@@ -287,21 +287,21 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     if parent not in _SWEPT:
         remove_stale_temporaries(parent)
         _SWEPT.add(parent)
-    while True:
-        tmp_path = dest.parent / f".{dest.stem}{TMP_MARKER}{os.getpid()}-{secrets.token_hex(4)}{dest.suffix}"
-        try:
-            fd = os.open(tmp_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-        except FileExistsError:
-            continue
-        os.close(fd)
-        break
+    tmp_path = None
     try:
+        while tmp_path is None:
+            candidate = dest.parent / f".{dest.stem}{TMP_MARKER}{os.getpid()}-{secrets.token_hex(4)}{dest.suffix}"
+            try:
+                os.close(os.open(candidate, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+            except FileExistsError:
+                continue
+            tmp_path = candidate
         yield tmp_path
         os.replace(tmp_path, dest)
     finally:
-        with contextlib.suppress(OSError):
-            if tmp_path.exists():
-                tmp_path.unlink()
+        if tmp_path is not None:
+            with contextlib.suppress(OSError):
+                tmp_path.unlink(missing_ok=True)
 
 
 def save_image(path: str | os.PathLike, img: np.ndarray, jpeg_quality: int = 95) -> None:
