@@ -143,7 +143,7 @@ BIG_EXPECTED = {
     "inspect": (2, "differ by a factor"),  # the 320x240 reference and the 9000x9000 probe cannot be one part
     "homography": (1, "chance level"),  # the big texture is unrelated to view B
     "stereo": (2, "over the memory budget"),  # 9000 x 9000 x 16 disparities: names --max-disp
-    "stitch": (1, None),
+    "stitch": (0, None),  # the same photo twice stitches to itself, composed at a reduced size (a note)
 }
 #: address-space cap of each 81 MP run: the 4 GB budget plus the decoded images, numba and OpenCV's threads
 BIG_CAP_BYTES = 12 * 1024**3
@@ -176,9 +176,6 @@ def test_sweep_81_megapixels(command, big_image, world, tmp_path):
     env = dict(os.environ, CVPIPE_MEMORY_BUDGET_GB="4")
     proc = subprocess.run([sys.executable, "-m", "cvpipe.cli", *argv], capture_output=True, text=True, env=env,
                           preexec_fn=_cap, timeout=1800)
-    exit_code, fragment = BIG_EXPECTED[command]
-    if command == "stitch" and proc.returncode == 0:  # the same photo twice may also stitch to itself
-        exit_code = 0
-    if fragment is None and exit_code:
-        fragment = "cvpipe: error:"[len("cvpipe: error:"):]  # any one line
-    check_contract(proc.returncode, proc.stdout, proc.stderr, (exit_code, fragment or ""), big_image, out, product)
+    check_contract(proc.returncode, proc.stdout, proc.stderr, BIG_EXPECTED[command], big_image, out, product)
+    if command in ("logo", "stitch"):  # work done at a smaller size says so
+        assert "cvpipe: note:" in proc.stderr and "memory budget" in proc.stderr
