@@ -4,13 +4,17 @@ VENV ?= .venv
 BIN := $(CURDIR)/$(VENV)/bin
 export NUMBA_CACHE_DIR ?= $(CURDIR)/.numba_cache
 
-.PHONY: run test bench clean-venv
+.PHONY: run test test-fast bench clean-venv
 
 run: $(VENV)/.installed
 	PATH="$(BIN):$$PATH" $(BIN)/dvc repro
 
 test: $(VENV)/.installed
 	PATH="$(BIN):$$PATH" $(BIN)/python -m pytest -q
+
+# the inner loop: everything but the slow tier (dvc pipeline runs, the browser, 81 MP images, real clusters)
+test-fast: $(VENV)/.installed
+	PATH="$(BIN):$$PATH" $(BIN)/python -m pytest -q -m "not slow"
 
 bench: $(VENV)/.installed
 	PATH="$(BIN):$$PATH" $(BIN)/cvpipe bench pipeline

@@ -5,13 +5,15 @@ a small pyramid), warp the probe into the reference frame, fit gain and bias bet
 difference that tolerates the last pixel or so of misregistration (the probe is compared against the min/max of the
 reference over a small disc and vice versa), threshold it with hysteresis, clean it with morphology and turn the
 connected components into regions, in reference and probe pixels. A probe with at least one region is ``faulty``.
+Each step is a function of its own (:func:`register`, :func:`register_direct`, :func:`warp_probe`,
+:func:`difference`, :func:`find_regions`, :func:`choose`): :func:`inspect` runs them all, each DVC stage one.
 
 Every homography here maps reference pixels to probe pixels (x = column, y = row).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -99,6 +101,21 @@ class Difference:
     bias: float
     noise: float
     contrast: float
+
+    def to_arrays(self, prefix: str = "") -> dict[str, np.ndarray]:
+        """Named arrays for ``io.save_npz``, each name prefixed by ``prefix``."""
+        return {prefix + k: np.asarray(getattr(self, k)) for k in ("diff", "valid", "gain", "bias", "noise",
+                                                                     "contrast")}
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray], prefix: str = "") -> "Difference":
+        """Inverse of :meth:`to_arrays`."""
+        return cls(np.asarray(arrays[prefix + "diff"], np.float32), np.asarray(arrays[prefix + "valid"], bool),
+                   *(float(arrays[prefix + k]) for k in ("gain", "bias", "noise", "contrast")))
+
+    def photometry(self) -> dict[str, float]:
+        """The scalar fields (photometric fit, noise, contrast), for a JSON record."""
+        return {k: getattr(self, k) for k in ("gain", "bias", "noise", "contrast")}
 
 
 @dataclass(frozen=True)
@@ -597,9 +614,113 @@ def find_regions(diff: Difference, H: np.ndarray, probe_shape: tuple[int, int],
 # --------------------------------------------------------------------------------------------------- all at once
 
 
+def register_direct(reference: np.ndarray, probe: np.ndarray, params: DefectRegisterParams | None = None, *,
+                    matches: int = 0, inliers: int = 0) -> Registration:
+    """The direct registration: ECC started from a phase-correlation shift, without keypoints.
+
+    :func:`register` falls back to it when the keypoints fail; :func:`inspect` also asks for it when a keypoint
+    registration makes the probe faulty (see :func:`choose`).
+
+    Parameters
+    ----------
+    reference, probe : (H, W) or (H, W, 3) uint8
+    params : DefectRegisterParams, optional
+    matches, inliers : int
+        The keypoint counts to carry into the result (those of the registration it is an alternative to).
+
+    Returns
+    -------
+    Registration
+        With ``method == "direct"``.
+
+    Raises
+    ------
+    EstimationError
+        ECC did not converge or its result fails the geometry or correlation checks of :func:`register`.
+    """
+    p = params or DefectRegisterParams()
+    ref, prb = _check_gray("reference", reference), _check_gray("probe", probe)
+    return _align(ref, prb, _translation_init(ref, prb), "direct", p, matches, inliers, "")
+
+
+def wants_alternative(registration: Registration, params: DefectRegisterParams | None = None) -> bool:
+    """Whether a direct registration may replace ``registration`` (it came from keypoints, ``direct_fallback`` on).
+
+    On sparse boards the keypoints can lock ECC onto an alignment that is right where most of the copper is and off
+    elsewhere; before such a probe is called faulty, the direct alignment is compared as well (:func:`choose`).
+    """
+    return registration.method == "features" and (params or DefectRegisterParams()).direct_fallback
+
+
+def choose(first: Inspection, alternative: Inspection | None) -> Inspection:
+    """The inspection to keep: ``first``, unless it is faulty and the ``alternative`` leaves a lower score.
+
+    Parameters
+    ----------
+    first : Inspection
+        The comparison after :func:`register`'s registration.
+    alternative : Inspection or None
+        The comparison after :func:`register_direct`'s registration, when :func:`wants_alternative` and it
+        succeeded.
+    """
+    if alternative is not None and first.verdict == "faulty" and alternative.score < first.score:
+        return alternative
+    return first
+
+
+def warp_probe(probe: np.ndarray, H: np.ndarray, reference_shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """The probe on the reference grid and the reference pixels it covers.
+
+    Parameters
+    ----------
+    probe : (h, w) uint8
+    H : (3, 3)
+        Reference -> probe.
+    reference_shape : (H, W)
+
+    Returns
+    -------
+    warped : (H, W) uint8
+        :func:`warp_to_reference` of the probe.
+    valid : (H, W) bool
+        Reference pixels whose whole bilinear footprint lies inside the probe.
+    """
+    probe = np.asarray(probe)
+    warped = warp_to_reference(probe, H, reference_shape)
+    valid = warp_to_reference(np.full(probe.shape[:2], 255, np.uint8), H, reference_shape) == 255
+    return warped, valid
+
+
+def compare(reference: np.ndarray, warped: np.ndarray, valid: np.ndarray, registration: Registration,
+            probe_shape: tuple[int, int], diff: DefectDiffParams | None = None,
+            regions: DefectRegionParams | None = None) -> Inspection:
+    """:func:`difference` then :func:`find_regions` for one registration: the verdict it leads to.
+
+    Parameters
+    ----------
+    reference : (H, W) uint8
+    warped, valid : (H, W)
+        :func:`warp_probe` of the probe by ``registration.H``.
+    registration : Registration
+    probe_shape : (h, w)
+    diff, regions : DefectDiffParams, DefectRegionParams, optional
+
+    Returns
+    -------
+    Inspection
+        With ``registration`` and ``difference`` filled in.
+    """
+    d = difference(reference, warped, valid, diff)
+    return replace(find_regions(d, registration.H, probe_shape, regions), registration=registration)
+
+
 def inspect(reference: np.ndarray, probe: np.ndarray, params: InspectParams | None = None, *,
             reference_features: Features | None = None) -> Inspection:
     """Register ``probe`` to ``reference``, compare them and judge the probe.
+
+    The steps, each a function of its own (the DVC stages run them one by one): :func:`register`,
+    :func:`warp_probe`, :func:`compare` (:func:`difference` and :func:`find_regions`), and for a faulty probe
+    registered by keypoints the same with :func:`register_direct`, keeping the result :func:`choose` picks.
 
     Parameters
     ----------
@@ -622,47 +743,15 @@ def inspect(reference: np.ndarray, probe: np.ndarray, params: InspectParams | No
     ref, prb = _check_gray("reference", reference), _check_gray("probe", probe)
     reg = register(ref, prb, p.register, reference_features=reference_features, features=p.features,
                    matching=p.match)
-    return _second_opinion(ref, prb, reg, p)
-
-
-def register_for_inspection(reference: np.ndarray, probe: np.ndarray, params: InspectParams | None = None, *,
-                            reference_features: Features | None = None, probe_features: Features | None = None,
-                            matches: np.ndarray | None = None) -> Registration:
-    """The registration :func:`inspect` ends up using (for pipelines that store it between stages).
-
-    That is :func:`register`, except that a keypoint registration whose comparison finds defects is replaced by the
-    direct one (phase correlation + ECC) when that one leaves a smaller difference.
-    """
-    p = params or InspectParams()
-    ref, prb = _check_gray("reference", reference), _check_gray("probe", probe)
-    reg = register(ref, prb, p.register, reference_features=reference_features, probe_features=probe_features,
-                   matches=matches, features=p.features, matching=p.match)
-    return _second_opinion(ref, prb, reg, p).registration
-
-
-def _second_opinion(ref: np.ndarray, prb: np.ndarray, reg: Registration, p: InspectParams) -> Inspection:
-    result = _compare(ref, prb, reg, p)
-    if result.verdict == "faulty" and reg.method == "features" and p.register.direct_fallback:
-        # On sparse boards the keypoints can lock ECC onto an alignment that is right where most of the copper is
-        # and off elsewhere; before calling the probe faulty, try the direct start and keep the smaller difference.
-        try:
-            alt = _align(ref, prb, _translation_init(ref, prb), "direct", p.register, reg.matches, reg.inliers, "")
-        except EstimationError:
-            return result
-        other = _compare(ref, prb, alt, p)
-        if other.score < result.score:
-            return other
-    return result
-
-
-def _compare(ref: np.ndarray, prb: np.ndarray, reg: Registration, p: InspectParams) -> Inspection:
-    """Warp, difference and regions for one registration."""
-    warped = warp_to_reference(prb, reg.H, ref.shape)
-    valid = warp_to_reference(np.full(prb.shape, 255, np.uint8), reg.H, ref.shape) == 255
-    diff = difference(ref, warped, valid, p.diff)
-    result = find_regions(diff, reg.H, prb.shape, p.regions)
-    return Inspection(result.verdict, result.score, result.regions, result.probe_regions, result.region_scores,
-                      result.threshold, reg, diff)
+    result = compare(ref, *warp_probe(prb, reg.H, ref.shape), reg, prb.shape, p.diff, p.regions)
+    if result.verdict != "faulty" or not wants_alternative(reg, p.register):
+        return result
+    try:
+        alt = register_direct(ref, prb, p.register, matches=reg.matches, inliers=reg.inliers)
+        other = compare(ref, *warp_probe(prb, alt.H, ref.shape), alt, prb.shape, p.diff, p.regions)
+    except EstimationError:  # the alternative is only a second opinion: the first result stands
+        return result
+    return choose(result, other)
 
 
 # --------------------------------------------------------------------------------------------------- pictures

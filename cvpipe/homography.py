@@ -1449,99 +1449,189 @@ def alignment_panel(img_a: np.ndarray, img_b: np.ndarray, panels: dict, tiles: i
     return np.hstack(cols)
 
 
-def summarize_methods(truth_pairs: list, runs: dict, success_px: float = 3.0) -> tuple[dict, dict]:
-    """Corner error against the truth, success rate, inliers and time per method.
+def metric_key(name: str) -> str:
+    """A pair name as a metrics key: no dots (DVC joins nested keys with dots) and never ``all``."""
+    key = str(name).replace(".", "_")
+    return "pair_all" if key == "all" else key
+
+
+def compare_methods(pairs: list[dict], runs: dict, success_px: float = 3.0) -> dict:
+    """Corner error (pairs with truth), inliers and failures of every method on every matched pair.
 
     Parameters
     ----------
-    truth_pairs : list of dict
-        ``{"name", "H" (A -> B), "size_a": [w, h]}`` per pair.
+    pairs : list of dict
+        ``{"name", "matches", "size_a": [w, h], "H": (3, 3) true A -> B or None}`` per matched pair.
     runs : dict
-        Method -> pair name -> ``{"H" or None, "inliers", "matches", "time_ms"}``.
+        Method -> a ``homography_estimate`` result ``{"pairs": {name: {"H", "inliers", ...}}, "dropped": [...]}``;
+        a pair missing from ``pairs`` of a run is a failed estimate.
     success_px : float
-        A pair succeeds when its corner error is at most this many pixels.
+        A pair with truth succeeds when its corner error is at most this many pixels.
 
     Returns
     -------
-    metrics : dict
-        Method -> ``median_corner_error_px``, ``mean_corner_error_px`` (over successes), ``success_rate``,
-        ``pairs_within``, ``pairs``, ``median_inliers``, ``median_time_ms``, ``failures``.
-    per_pair : dict
-        Pair name -> method -> ``corner_error_px`` (None when the method failed), ``inliers``, ``matches``,
-        ``time_ms``.
+    dict
+        ``methods`` (names), ``pairs`` and ``truth_pairs`` (counts), ``success_px``, ``per_pair`` (name ->
+        ``{"matches", "truth": bool, method: {"inliers", "estimated", "corner_error_px" (truth and an estimate),
+        "within" (truth)}}``, in the order of ``pairs``) and ``all`` (method -> ``pairs``, ``estimated``,
+        ``failures``, ``median_inliers`` (when any estimate) and, when any pair has truth, ``truth_pairs``,
+        ``pairs_within``, ``success_rate``, ``median_corner_error_px`` (a failure counts as infinite; omitted when
+        infinite) and ``mean_corner_error_px`` (over the successes; omitted without one)).
     """
     from .metrics import corner_error
 
+    methods = list(runs)
     per_pair: dict = {}
-    metrics: dict = {}
-    for method, pairs in runs.items():
-        errs, inl, times, fails = [], [], [], 0
-        for q in truth_pairs:
-            r = pairs.get(q["name"], {"H": None, "inliers": 0, "matches": 0})
-            w, h = q["size_a"]
-            e = corner_error(r["H"], q["H"], int(w), int(h)) if r.get("H") is not None else float("inf")
-            fails += r.get("H") is None
-            errs.append(e)
-            inl.append(r.get("inliers", 0))
-            if r.get("time_ms") is not None:
-                times.append(r["time_ms"])
-            per_pair.setdefault(q["name"], {})[method] = {
-                "corner_error_px": e if np.isfinite(e) else None, "inliers": r.get("inliers", 0),
-                "matches": r.get("matches", 0), "time_ms": r.get("time_ms")}
-        errs_a = np.array(errs)
-        ok = errs_a <= success_px
-        metrics[method] = {
-            "median_corner_error_px": float(np.median(errs_a)) if len(errs_a) else None,
-            "mean_corner_error_px": float(errs_a[ok].mean()) if ok.any() else None,
-            "success_rate": float(ok.mean()) if len(ok) else None,
-            "pairs_within": int(ok.sum()),
-            "pairs": len(errs_a),
-            "median_inliers": float(np.median(inl)) if inl else None,
-            "median_time_ms": float(np.median(times)) if times else None,
-            "failures": int(fails),
-        }
-    return metrics, per_pair
+    for q in pairs:
+        row: dict = {"matches": int(q["matches"]), "truth": q.get("H") is not None}
+        for m in methods:
+            est = runs[m]["pairs"].get(q["name"])
+            r: dict = {"inliers": int(est["inliers"]) if est else 0, "estimated": int(est is not None)}
+            if row["truth"]:
+                w, h = (int(v) for v in q["size_a"])
+                err = corner_error(est["H"], q["H"], w, h) if est else math.inf
+                if math.isfinite(err):
+                    r["corner_error_px"] = float(err)
+                r["within"] = int(err <= success_px)
+            row[m] = r
+        per_pair[q["name"]] = row
+    truth_names = [n for n, row in per_pair.items() if row["truth"]]
+    summary: dict = {}
+    for m in methods:
+        rows = [row[m] for row in per_pair.values()]
+        inl = [r["inliers"] for r in rows if r["estimated"]]
+        s: dict = {"pairs": len(rows), "estimated": len(inl), "failures": len(rows) - len(inl)}
+        if inl:
+            s["median_inliers"] = float(np.median(inl))
+        if truth_names:
+            errs = np.array([per_pair[n][m].get("corner_error_px", math.inf) for n in truth_names])
+            ok = errs <= success_px
+            s.update(truth_pairs=len(errs), pairs_within=int(ok.sum()), success_rate=float(ok.mean()))
+            if np.isfinite(np.median(errs)):
+                s["median_corner_error_px"] = float(np.median(errs))
+            if ok.any():
+                s["mean_corner_error_px"] = float(errs[ok].mean())
+        summary[m] = s
+    return {"methods": methods, "pairs": len(per_pair), "truth_pairs": len(truth_names), "success_px": success_px,
+            "per_pair": per_pair, "all": summary}
 
 
-def report_summary(metrics: dict, per_pair: dict, pictures: list, success_px: float) -> dict:
+def metrics_of(compared: dict) -> dict:
+    """The numeric metrics of :func:`compare_methods` output: ``{"homography": {method: {"all": {...}, pair: {...}}}}``
+    (DVC shows them as ``homography.<method>.<pair>.corner_error_px``)."""
+    out: dict = {}
+    for m in compared["methods"]:
+        out[m] = {"all": dict(compared["all"][m])}
+        for name, row in compared["per_pair"].items():
+            out[m][metric_key(name)] = {"matches": row["matches"], **row[m]}
+    return {"homography": out}
+
+
+def picture_panels(compared: dict, name: str, true_H, estimates: dict) -> tuple[dict, str]:
+    """The labelled panels of one pair's :func:`alignment_panel` and its caption.
+
+    Parameters
+    ----------
+    compared : dict
+        :func:`compare_methods` output.
+    name : str
+        The pair.
+    true_H : (3, 3) array_like or None
+        The true homography A -> B, when known (then it is the first panel).
+    estimates : dict
+        Method -> estimated H A -> B, or None when the method failed on the pair.
+    """
+    row = compared["per_pair"][name]
+    panels: dict = {} if true_H is None else {"truth": true_H}
+    for m in compared["methods"]:
+        r = row[m]
+        if not r["estimated"]:
+            label = f"{m}: failed"
+        elif "corner_error_px" in r:
+            label = f"{m}: {r['corner_error_px']:.2f} px"
+        else:
+            label = f"{m}: {r['inliers']} inliers"
+        panels[label] = estimates.get(m)
+    first = "the true homography, then each method" if true_H is not None else "each method (no ground truth)"
+    return panels, f"{name}: B warped onto A as a checkerboard, {first}"
+
+
+def report_summary(compared: dict, pictures: list, dropped: list[dict]) -> dict:
     """The report page's summary of the homography task (schema in ``cvpipe.report``).
 
     Parameters
     ----------
-    metrics, per_pair : dict
-        The two results of :func:`summarize_methods`.
+    compared : dict
+        :func:`compare_methods` output.
     pictures : list of dict
         ``{"path", "caption"}`` per pair picture, repo-relative paths.
-    success_px : float
-        The success criterion used in ``metrics``.
+    dropped : list of dict
+        ``{"item", "reason"}`` for every input, pair or estimate that was not processed.
     """
-    methods = list(metrics)
+    methods, px = compared["methods"], compared["success_px"]
+    none = "no ground truth"
+    has_truth = compared["truth_pairs"] > 0
 
     def r(v, nd=3):
         return None if v is None else round(float(v), nd)
 
-    per_method = [[m, r(metrics[m]["median_corner_error_px"]), f"{metrics[m]['pairs_within']} / {metrics[m]['pairs']}",
-                   r(metrics[m]["median_inliers"], 1), r(metrics[m]["median_time_ms"])] for m in methods]
-    rows = [[name] + [r(per_pair[name][m]["corner_error_px"]) for m in methods]
-            + [per_pair[name][methods[0]]["matches"]] for name in per_pair]
-    timings = {m: float(metrics[m]["median_time_ms"]) / 1e3 for m in methods if metrics[m]["median_time_ms"] is not None}
+    per_method = []
+    for m in methods:
+        s = compared["all"][m]
+        per_method.append([m, f"{s['estimated']} / {s['pairs']}", r(s.get("median_inliers"), 1),
+                           r(s.get("median_corner_error_px")) if has_truth else none,
+                           f"{s['pairs_within']} / {s['truth_pairs']}" if has_truth else none])
+    rows = []
+    for name, row in compared["per_pair"].items():
+        errs = [(r(row[m]["corner_error_px"]) if "corner_error_px" in row[m] else "failed") if row["truth"] else none
+                for m in methods]
+        inl = [row[m]["inliers"] if row[m]["estimated"] else "failed" for m in methods]
+        rows.append([name, row["matches"], *errs, *inl])
+    tables = [
+        {"title": "Per method",
+         "columns": ["method", "pairs estimated", "median inliers", "median corner error (px)",
+                     f"pairs within {px:g} px"], "rows": per_method},
+        {"title": "Per pair",
+         "columns": ["pair", "matches", *(f"{m} corner error (px)" for m in methods),
+                     *(f"{m} inliers" for m in methods)], "rows": rows},
+    ]
+    if dropped:
+        tables.append({"title": "Not processed", "columns": ["input", "reason"],
+                       "rows": [[d["item"], d["reason"]] for d in dropped]})
+    if has_truth:
+        truth_note = (f"{compared['truth_pairs']} of {compared['pairs']} pairs have a true homography: corner error is "
+                      "the mean distance of A's four corners mapped by the estimated and the true H, and a pair "
+                      f"succeeds within {px:g} px.")
+        without = [n for n, row in compared["per_pair"].items() if not row["truth"]]
+        if without:
+            truth_note += f" Without ground truth (inliers only): {', '.join(without)}."
+    else:
+        truth_note = ("These pairs have no ground truth: the tables compare the methods by inliers (matches within "
+                      "the threshold) and the pictures show each method's alignment.")
     return {
         "task": "homography",
         "title": "Our normalized DLT + LO-RANSAC against OpenCV RANSAC and USAC_MAGSAC, on the same matches",
         "description": (
-            "SIFT matches of each sample pair (A, B) go to every estimator with the same threshold, confidence and "
-            "iteration cap. Corner error: mean distance of A's four corners mapped by the estimated and the true H; "
-            f"a pair succeeds within {success_px:g} px. Pictures: B warped into A's frame as a checkerboard (truth, "
-            "then one panel per method); misalignment shows as steps at the square borders. Times are per estimate, "
-            "each method's stage timed separately (`cvpipe bench homography` interleaves them on real pairs)."),
+            "The matches of each pair (A, B) go to every estimator with the same threshold, confidence and "
+            f"iteration cap. {truth_note} Pictures: B warped into A's frame as a checkerboard, one panel per "
+            "method; misalignment shows as steps at the square borders. Times: `dvc plots show` (outputs/timings) "
+            "and `cvpipe bench homography`."),
         "pictures": pictures,
-        "tables": [
-            {"title": "Per method", "columns": ["method", "median corner error (px)", f"pairs within {success_px:g} px",
-                                                 "median inliers", "median time (ms)"], "rows": per_method},
-            {"title": "Corner error per pair (px)", "columns": ["pair"] + methods + ["matches"], "rows": rows},
-        ],
-        "timings": timings,
+        "tables": tables,
     }
+
+
+def quality_plots(compared: dict) -> dict[str, list[dict]]:
+    """``dvc plots`` rows per file: ``corner_error`` (pairs with truth and an estimate) and ``inliers`` (every pair;
+    0 for a failed estimate), each row ``{"pair", "method", "label", <value>}``."""
+    corner, inliers = [], []
+    for name, row in compared["per_pair"].items():
+        for m in compared["methods"]:
+            base = {"pair": name, "method": m, "label": f"{name} {m}"}
+            inliers.append({**base, "inliers": row[m]["inliers"]})
+            if "corner_error_px" in row[m]:
+                corner.append({**base, "corner_error_px": row[m]["corner_error_px"]})
+    return {"corner_error": corner, "inliers": inliers}
 
 
 # --------------------------------------------------------------------------------------- method registry

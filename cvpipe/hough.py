@@ -867,27 +867,27 @@ def median_seconds(fn, repeats: int = 5, warmup: int = 1) -> float:
 
 def compare_runs(ours: dict, opencv: dict, truth: dict | None = None, rho_tol: float = 3.0,
                  theta_tol: float = np.deg2rad(1.5)) -> dict:
-    """Agreement, time ratio and truth recall of two ``hough_lines`` stage results (see ``stages/hough_lines.py``).
+    """Agreement and truth recall of two ``hough_lines`` stage results (see ``stages/hough_lines.py``).
 
     Parameters
     ----------
     ours, opencv : dict
-        ``{"rho", "theta", "images": [{"file", "lines": [[rho, theta, votes]], "seconds"}]}`` per implementation.
+        ``{"rho", "theta", "images": [{"file", "lines": [[rho, theta, votes]]}]}`` per implementation.
     truth : dict or None
-        ``{"images": [{"file", "lines": [[rho, theta]]}]}``; files are matched by stem.
+        Image stem -> (N, 2) true ``[rho, theta]`` lines, for the images that have truth.
 
     Returns
     -------
     dict
         ``per_image`` entries and the summary: ``parity_min``/``parity_mean`` (share of OpenCV's lines in the same
-        cell), ``identical_images`` (same lines, votes and order), ``time_ratio_median`` (ours / opencv seconds) and,
-        with ``truth``, ``recall_ours``/``recall_opencv`` (true lines found within the tolerances).
+        cell), ``identical_images`` (same lines, votes and order) and, when any image has truth,
+        ``recall_ours``/``recall_opencv`` (true lines found within the tolerances) and ``truth_images``.
     """
     from pathlib import PurePath
 
-    stem = lambda name: PurePath(name).stem  # noqa: E731 - edge maps are PNGs of the same stem as the samples
+    stem = lambda name: PurePath(name).stem  # noqa: E731 - edge maps are PNGs of the same stem as the inputs
     ref = {stem(i["file"]): i for i in opencv["images"]}
-    true = {stem(i["file"]): i["lines"] for i in (truth or {"images": []})["images"]}
+    true = truth or {}
     rows, found = [], {"ours": [], "opencv": []}
     for mine in ours["images"]:
         name = stem(mine["file"])
@@ -895,27 +895,33 @@ def compare_runs(ours: dict, opencv: dict, truth: dict | None = None, rho_tol: f
             raise InputError(f"image {name!r} is in ours but not in the opencv run")
         a, b = _as_lines(mine["lines"]), _as_lines(ref[name]["lines"])
         agree = cell_agreement(a, b, ours["rho"], ours["theta"])
-        row = {"file": name, **agree, "identical": bool(a.shape == b.shape and np.array_equal(a, b)),
-               "time_ratio": mine["seconds"] / ref[name]["seconds"] if ref[name]["seconds"] > 0 else float("nan")}
+        row = {"file": name, **agree, "identical": bool(a.shape == b.shape and np.array_equal(a, b))}
         if name in true:
             for key, lines in (("ours", a), ("opencv", b)):
-                hit = truth_matches(lines, true[name], rho_tol, theta_tol)
+                hit = truth_matches(lines, np.asarray(true[name], dtype=float).reshape(-1, 2), rho_tol, theta_tol)
                 row[f"truth_found_{key}"] = int(hit.sum())
                 found[key].append(hit)
             row["truth_lines"] = len(true[name])
         rows.append(row)
     parity = [r["parity"] for r in rows]
     out = {"images": len(rows), "parity_min": min(parity, default=1.0), "parity_mean": float(np.mean(parity or [1.0])),
-           "identical_images": sum(r["identical"] for r in rows),
-           "time_ratio_median": float(np.median([r["time_ratio"] for r in rows])) if rows else float("nan"),
+           "identical_images": sum(r["identical"] for r in rows), "truth_images": len(found["ours"]),
            "per_image": rows}
     for key, hits in found.items():
         if hits:
-            out[f"recall_{key}"] = float(np.concatenate(hits).mean())
+            out[f"recall_{key}"] = float(np.concatenate(hits).mean()) if sum(map(len, hits)) else 1.0
     return out
 
 
-def report_summary(metrics: dict, ours: dict, opencv: dict, pictures: list[dict]) -> dict:
+def metrics_of(compared: dict) -> dict:
+    """The flat numeric metrics of :func:`compare_runs` output, namespaced by image (``{"hough": {...}}``)."""
+    summary = {k: v for k, v in compared.items() if k != "per_image"}
+    per_image = {r["file"]: {k: (int(v) if isinstance(v, bool) else v) for k, v in r.items() if k != "file"}
+                 for r in compared["per_image"]}
+    return {"hough": {"all": summary, **per_image}}
+
+
+def report_summary(metrics: dict, ours: dict, opencv: dict, pictures: list[dict], dropped: list[dict]) -> dict:
     """The report page's summary of the hough task (schema in ``cvpipe.report``), from ``compare_runs`` output.
 
     Parameters
@@ -923,47 +929,57 @@ def report_summary(metrics: dict, ours: dict, opencv: dict, pictures: list[dict]
     metrics : dict
         ``compare_runs(ours, opencv, truth)``.
     ours, opencv : dict
-        The two ``hough_lines`` stage results (for the parameters and the per-image seconds).
+        The two ``hough_lines`` stage results (for the parameters).
     pictures : list of dict
         ``{"path", "caption"}`` overlays, repo-relative paths.
+    dropped : list of dict
+        ``{"item", "reason"}`` for every input image that was not processed.
     """
     rows = metrics["per_image"]
-    seconds = {k: float(sum(i["seconds"] for i in run["images"])) for k, run in (("ours", ours), ("opencv", opencv))}
+    has_truth = metrics["truth_images"] > 0
     methods = []
     for key in ("ours", "opencv"):
         recall = metrics.get(f"recall_{key}")
         methods.append([key, int(sum(r["our_lines" if key == "ours" else "ref_lines"] for r in rows)),
                         metrics["parity_min"] if key == "ours" else 1.0,
-                        None if recall is None else round(recall, 4), round(1e3 * seconds[key], 3)])
-    per_image = [[r["file"], r["ref_lines"], r["reproduced"], r["identical"], round(r["time_ratio"], 3),
-                  r.get("truth_found_ours"), r.get("truth_found_opencv"), r.get("truth_lines")] for r in rows]
+                        "no ground truth" if recall is None else round(recall, 4)])
+    none = "no ground truth"
+    per_image = [[r["file"], r["ref_lines"], r["reproduced"], r["identical"], r.get("truth_found_ours", none),
+                  r.get("truth_found_opencv", none), r.get("truth_lines", none)] for r in rows]
+    truth_note = (f"{metrics['truth_images']} of {metrics['images']} images have true lines." if has_truth else
+                  "These images have no ground truth: the table compares the two implementations only.")
+    tables = [
+        {"title": "Per method",
+         "columns": ["method", "lines", "share of OpenCV's lines reproduced (min over images)",
+                     "recall of true lines"],
+         "rows": methods},
+        {"title": "Per image",
+         "columns": ["image", "OpenCV lines", "reproduced by ours", "identical output", "true lines found (ours)",
+                     "true lines found (OpenCV)", "true lines"],
+         "rows": per_image},
+    ]
+    if dropped:
+        tables.append({"title": "Not processed", "columns": ["input", "reason"],
+                       "rows": [[d["item"], d["reason"]] for d in dropped]})
     return {
         "task": "hough",
         "title": "Our standard Hough transform against cv2.HoughLines at identical parameters",
         "description": (
-            f"Canny edges of each sample image, then both transforms with rho {ours['rho']:g} px, theta "
+            f"Canny edges of each image, then both transforms with rho {ours['rho']:g} px, theta "
             f"{math.degrees(ours['theta']):g} deg, threshold {ours['threshold']}. Ours reproduces "
-            f"{metrics['identical_images']} of {metrics['images']} images exactly (same cells, votes and order); its "
-            f"median time is {metrics['time_ratio_median']:.2f} x OpenCV's (the two stages timed separately, "
-            "`cvpipe bench hough` interleaves them). Overlays: ours in red (left), OpenCV's in green (right)."),
+            f"{metrics['identical_images']} of {metrics['images']} images exactly (same cells, votes and order). "
+            f"{truth_note} Overlays: ours in red (left), OpenCV's in green (right). Times: `dvc plots show` "
+            "(outputs/timings) and `cvpipe bench hough`."),
         "pictures": pictures,
-        "tables": [
-            {"title": "Per method (all sample images)",
-             "columns": ["method", "lines", "share of OpenCV's lines reproduced (min over images)",
-                         "recall of true lines", "total of median times (ms)"],
-             "rows": methods},
-            {"title": "Per image",
-             "columns": ["image", "OpenCV lines", "reproduced by ours", "identical output", "time ours / OpenCV",
-                         "true lines found (ours)", "true lines found (OpenCV)", "true lines"],
-             "rows": per_image},
-        ],
-        "timings": seconds,
+        "tables": tables,
     }
 
 
-def time_plot(ours: dict, opencv: dict) -> list[dict]:
-    """``dvc plots`` rows ``{"label": "<image> <impl>", "ms"}``: median time per image and implementation."""
-    from pathlib import PurePath
-
-    return [{"label": f"{PurePath(i['file']).stem} {key}", "ms": round(1e3 * i["seconds"], 4)}
-            for key, run in (("ours", ours), ("opencv", opencv)) for i in run["images"]]
+def quality_plot(metrics: dict) -> list[dict]:
+    """``dvc plots`` rows ``{"image", "method", "lines", "true_found"}``: what each implementation found per image."""
+    rows = []
+    for r in metrics["per_image"]:
+        for key, count in (("ours", r["our_lines"]), ("opencv", r["ref_lines"])):
+            rows.append({"image": r["file"], "method": key, "lines": int(count),
+                         "true_found": r.get(f"truth_found_{key}")})
+    return rows

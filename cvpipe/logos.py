@@ -1158,3 +1158,197 @@ def _bgr(img: np.ndarray) -> np.ndarray:
     if img.ndim == 2:
         return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
     return img[..., :3]
+
+
+# ------------------------------------------------------------------------------------ pipeline results (pure)
+
+#: what an accuracy cell says when no scene of the run has ground truth
+NO_TRUTH = "no ground truth"
+
+
+def scene_record(scene: str, det: Detection, reference: str | None, truth: tuple[str | None, np.ndarray | None]
+                 | None = None) -> dict:
+    """The JSON record of one scene's decision as the ``logo_verify`` stage stores it.
+
+    Parameters
+    ----------
+    scene : str
+        The scene's name (file stem).
+    det : Detection
+        From :func:`decide`.
+    reference : str or None
+        Name of the reference image of ``det.best`` (None when no hypothesis was plausible).
+    truth : (brand, quad) or None
+        The scene's ground truth (brand None = no gallery logo, quad (4, 2) or None); None when it has none.
+
+    Returns
+    -------
+    dict
+        ``scene``, ``brand`` (after the threshold), ``score`` (of the best plausible hypothesis, None when there is
+        none), ``inliers``, ``quad``, ``best_brand`` (before the threshold), ``reference``, ``labelled`` and, for a
+        labelled scene, ``truth``, ``truth_quad`` and ``quad_error_px`` (when the brand is right).
+    """
+    best = det.best
+    rec = {"scene": scene, "brand": det.brand, "inliers": int(det.inliers),
+           "score": float(det.score) if np.isfinite(det.score) else None,
+           "quad": None if det.quad is None else np.asarray(det.quad, np.float64).tolist(),
+           "best_brand": best.brand if best is not None else None, "reference": reference,
+           "labelled": truth is not None}
+    if truth is not None:
+        brand, quad = truth
+        rec.update(truth=brand, truth_quad=None if quad is None else np.asarray(quad, np.float64).tolist(),
+                   quad_error_px=(quad_error(det.quad, quad, cyclic=True)
+                                  if det.brand is not None and det.brand == brand else None))
+    return rec
+
+
+def evaluate_records(records: Sequence[dict], threshold: float) -> dict | None:
+    """:func:`evaluate` over the labelled scene records of :func:`scene_record`, plus ``quad_error_px_median``
+    (over the scenes whose brand is right, when any); None when no record is labelled."""
+    lab = [r for r in records if r["labelled"]]
+    if not lab:
+        return None
+    ev = evaluate([r["truth"] for r in lab], [r["best_brand"] for r in lab],
+                  [r["score"] if r["score"] is not None else -np.inf for r in lab], threshold)
+    errs = [r["quad_error_px"] for r in lab if r.get("quad_error_px") is not None]
+    if errs:
+        ev["quad_error_px_median"] = float(np.median(errs))
+    return ev
+
+
+def metric_key(name: str) -> str:
+    """``name`` usable as one DVC metric key (DVC joins nested keys with dots)."""
+    return name.replace(".", "_")
+
+
+def found_counts(records: Sequence[dict], brands: Sequence[str]) -> dict[str, int]:
+    """Scenes answered with each brand (every brand listed, 0 when never found)."""
+    return {b: sum(r["brand"] == b for r in records) for b in brands}
+
+
+def metrics_of(records: Sequence[dict], brands: Sequence[str], detector: str, threshold: float) -> dict:
+    """The numeric metrics of one detector's run, ``{"logo": {detector: {"all": {...}, "found": {brand: n}}}}``.
+
+    ``all`` always has the counts ``scenes`` and ``answered`` (scenes given a brand) and ``labelled`` (scenes with
+    ground truth); with ground truth also ``precision``, ``recall``, ``accuracy``, ``correct``, ``positives`` (over
+    the labelled scenes) and ``quad_error_px_median`` when some brand was right. No strings, no NaN.
+    """
+    summary = {"scenes": len(records), "answered": sum(r["brand"] is not None for r in records),
+               "labelled": sum(bool(r["labelled"]) for r in records)}
+    ev = evaluate_records(records, threshold)
+    if ev is not None:
+        summary.update({k: ev[k] for k in ("precision", "recall", "accuracy", "correct", "positives",
+                                           "quad_error_px_median") if k in ev})
+    found = {metric_key(b): n for b, n in found_counts(records, brands).items()}
+    return {"logo": {metric_key(detector): {"all": summary, "found": found}}}
+
+
+def pr_rows(records: Sequence[dict], detector: str, threshold: float) -> list[dict]:
+    """``dvc plots`` rows ``{"threshold", "precision", "recall", "method"}`` of the precision-recall curve over the
+    labelled scenes; empty without ground truth (an empty plot file is valid for ``dvc plots``)."""
+    ev = evaluate_records(records, threshold)
+    return [] if ev is None else [dict(c, method=detector) for c in ev["curve"]]
+
+
+def found_plot(decisions: dict[str, Sequence[dict]], brands: Sequence[str]) -> list[dict]:
+    """``dvc plots`` rows ``{"label", "brand", "method", "found"}``: scenes answered with each brand per detector
+    (the quality plot that needs no ground truth)."""
+    return [{"label": f"{b} ({m})", "brand": b, "method": m, "found": n}
+            for m, recs in decisions.items() for b, n in found_counts(recs, brands).items()]
+
+
+def pick_method(decisions: dict[str, Sequence[dict]], threshold: float, default: str) -> str:
+    """The detector whose results the overlays show: the most accurate one with ground truth (ties: more correct
+    answers, then the earlier one), else ``default`` when it ran, else the first."""
+    scored = {m: evaluate_records(r, threshold) for m, r in decisions.items()}
+    if any(v is not None for v in scored.values()):
+        return max((m for m in decisions if scored[m] is not None),
+                   key=lambda m: (scored[m]["accuracy"], scored[m]["correct"], -list(decisions).index(m)))
+    return default if default in decisions else next(iter(decisions))
+
+
+def merge_dropped(dropped: dict[str, Sequence[dict]]) -> list[dict]:
+    """Per-detector ``{"item", "reason"}`` lists merged into one, each item and reason once with the detectors that
+    dropped it (``{"item", "reason", "methods"}``), in first-seen order."""
+    merged: dict[tuple[str, str], list[str]] = {}
+    for m, items in dropped.items():
+        for d in items:
+            merged.setdefault((d["item"], d["reason"]), [])
+            if m not in merged[(d["item"], d["reason"])]:
+                merged[(d["item"], d["reason"])].append(m)
+    return [{"item": i, "reason": r, "methods": ms} for (i, r), ms in merged.items()]
+
+
+def report_summary(decisions: dict[str, Sequence[dict]], brands: Sequence[str], references: int,
+                   threshold: float, pictures: list[dict], dropped: list[dict]) -> dict:
+    """The report page's summary of the logo task (schema in ``cvpipe.report``).
+
+    Parameters
+    ----------
+    decisions : dict
+        Detector -> its scene records (:func:`scene_record`), every detector over the same scenes.
+    brands : sequence of str
+        The gallery's brands.
+    references : int
+        Number of gallery images.
+    threshold : float
+        The decision threshold the records were made with (``logo.verify.score_threshold``).
+    pictures : list of dict
+        ``{"path", "caption"}``, repo-relative paths.
+    dropped : list of dict
+        From :func:`merge_dropped`: every input that was not processed, with the detectors and the reason.
+    """
+    methods = list(decisions)
+    scenes = sorted({r["scene"] for recs in decisions.values() for r in recs})
+    first = decisions[methods[0]] if methods else []
+    labelled = sum(bool(r["labelled"]) for r in first)
+    rows = []
+    for m in methods:
+        ev = evaluate_records(decisions[m], threshold)
+        acc = [NO_TRUTH] * 4 if ev is None else [
+            round(ev["accuracy"], 3), round(ev["precision"], 3), round(ev["recall"], 3),
+            round(ev["quad_error_px_median"], 2) if "quad_error_px_median" in ev else None]
+        rows.append([m, len(decisions[m]), sum(r["brand"] is not None for r in decisions[m]), *acc])
+    by_scene = {m: {r["scene"]: r for r in recs} for m, recs in decisions.items()}
+    scene_rows = []
+    for s in scenes:
+        truth = next((r for m in methods for r in [by_scene[m].get(s)] if r is not None), None)
+        row = [s, (truth.get("truth") or "none") if truth is not None and truth["labelled"] else NO_TRUTH]
+        for m in methods:
+            r = by_scene[m].get(s)
+            row += (["not processed", None, None] if r is None else
+                    [r["brand"] or "none", None if r["score"] is None else round(r["score"], 2), r["inliers"]])
+        scene_rows.append(row)
+    counts = {m: found_counts(decisions[m], brands) for m in methods}
+    tables = [
+        {"title": "Per detector",
+         "columns": ["detector", "scenes", "brand found", "accuracy", "precision", "recall",
+                     "outline error median (px)"], "rows": rows},
+        {"title": "Found per brand (scenes answered with it)", "columns": ["brand", *methods],
+         "rows": [[b, *(counts[m][b] for m in methods)] for b in brands]},
+        {"title": "Per scene: brand found, score (-log10 NFA) and inliers per detector",
+         "columns": ["scene", "true brand", *(f"{m} {c}" for m in methods for c in ("brand", "score", "inliers"))],
+         "rows": scene_rows},
+    ]
+    if dropped:
+        tables.append({"title": "Not processed", "columns": ["input", "reason"],
+                       "rows": [[d["item"], f"{', '.join(d['methods'])}: {d['reason']}"] for d in dropped]})
+    if labelled == len(first) and first:
+        truth_note = f"All {labelled} scenes have ground truth."
+    elif labelled:
+        truth_note = (f"{labelled} of {len(first)} scenes have ground truth; accuracy, precision and recall count "
+                      f"those only.")
+    else:
+        truth_note = "The scenes have no ground truth: the tables show what each detector found."
+    return {
+        "task": "logo", "title": "Logo recognition: which brand is in the scene and where",
+        "description": (
+            f"Every scene's features are matched against the gallery ({len(brands)} brands, {references} reference "
+            f"images) in one index; each reference's best homography is verified (RANSAC plus shape checks) and "
+            f"scored by its a-contrario significance (-log10 NFA); below {threshold:g} the answer is none. "
+            f"{truth_note} Overlays: found outline in green, {'true outline in blue, ' if labelled else ''}"
+            "inlier matches in orange. "
+            "Times: `dvc plots show` (outputs/timings)."),
+        "pictures": pictures,
+        "tables": tables,
+    }

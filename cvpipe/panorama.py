@@ -937,7 +937,7 @@ def _focal_from_cols(h: np.ndarray) -> float | None:
     return _pick(d1, d2, v1, v2)
 
 
-def _drop_reason(a: int, graph: MatchGraph, ids: Sequence[int]) -> str:
+def _drop_reason(a: int, graph: MatchGraph, ids: Sequence[int | str]) -> str:
     others = np.arange(len(graph.sizes)) != a
     score = np.where(others, graph.inliers[a] * 10_000 + graph.matches[a], -1)
     best = int(np.argmax(score))
@@ -957,7 +957,7 @@ ROTATION_RMS_FACTOR, ROTATION_RMS_SLACK = 1.5, 0.25
 
 
 def register(graph: MatchGraph, *, refine: str, max_points_per_pair: int, rng=None,
-             ids: Sequence[int] | None = None) -> Registration:
+             ids: Sequence[int | str] | None = None) -> Registration:
     """Global homographies of the largest group of images that match one another.
 
     Parameters
@@ -969,8 +969,8 @@ def register(graph: MatchGraph, *, refine: str, max_points_per_pair: int, rng=No
     max_points_per_pair : int
         Passed to :func:`refine_homographies`.
     rng : seed or Generator
-    ids : sequence of int, optional
-        How messages name the images (default: their positions).
+    ids : sequence of int or str, optional
+        How messages name the images (default: their positions; the stages pass file names).
 
     Raises
     ------

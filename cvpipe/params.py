@@ -569,6 +569,16 @@ SECTIONS.update({
 
 
 @dataclass(frozen=True)
+class StereoDisparityParams:
+    """``stereo.disparity``: the search range shared by every method (a pair's own truth or calibration wins)."""
+
+    max_disp: int = 64
+
+    def __post_init__(self):
+        _in_range("max_disp", self.max_disp, 1, 4096)
+
+
+@dataclass(frozen=True)
 class StereoSgmParams:
     """``stereo.sgm``: our semi-global matching (:func:`cvpipe.stereo.disparity_sgm`)."""
 
@@ -638,6 +648,7 @@ class StereoReportParams:
 
 
 SECTIONS.update({
+    "stereo.disparity": StereoDisparityParams,
     "stereo.sgm": StereoSgmParams,
     "stereo.opencv_bm": StereoBmParams,
     "stereo.opencv_sgbm": StereoSgbmParams,

@@ -8,8 +8,11 @@ Summary schema (one per task)::
 
     {"task": "<task>", "title": "one line", "description": "two or three sentences",
      "pictures": [{"path": "outputs/<task>/....png", "caption": "..."}],        # repo-relative paths
-     "tables": [{"title": "...", "columns": ["method", ...], "rows": [["ours", 0.12, ...], ...]}],
-     "timings": {"<method>": seconds, ...}}
+     "tables": [{"title": "...", "columns": ["method", ...], "rows": [["ours", 0.12, ...], ...]}]}
+
+Summaries are cached stage outputs, so they hold no timings (a rerun must reproduce them byte for byte); the stage
+runner writes timings to the uncached ``outputs/timings/``, which :func:`timing_rows` turns into the ``dvc plots``
+rows.
 """
 
 from __future__ import annotations
@@ -34,7 +37,7 @@ TASK_NAMES = {
     "panorama": "Panorama stitching",
 }
 #: keys of a summary, each with the type it must have
-SUMMARY_KEYS = {"task": str, "title": str, "description": str, "pictures": list, "tables": list, "timings": dict}
+SUMMARY_KEYS = {"task": str, "title": str, "description": str, "pictures": list, "tables": list}
 #: picture formats every browser shows
 PICTURE_SUFFIXES = (".png", ".jpg", ".jpeg")
 _CELL_TYPES = (str, int, float, bool, type(None))
@@ -122,9 +125,6 @@ def validate_summary(obj: Any, source: str = "summary") -> dict:
         _check_picture(pic, source, f"pictures[{i}]")
     for i, table in enumerate(obj["tables"]):
         _check_table(table, source, f"tables[{i}]")
-    for method, seconds in obj["timings"].items():
-        if not _is_number(seconds) or not math.isfinite(seconds) or seconds < 0:
-            raise _fail(source, f"timings.{method}", f"must be a finite number of seconds >= 0, got {seconds!r}")
     return obj
 
 
@@ -206,19 +206,25 @@ def format_seconds(seconds: float) -> str:
     return f"{seconds:.2f} s"
 
 
-def timing_rows(summaries: Iterable[Mapping[str, Any]]) -> list[dict]:
-    """One row per (task, method) timing, in page order: the data of the ``dvc plots`` timing bars.
+def timing_rows(timings: Iterable[Mapping[str, Any]]) -> list[dict]:
+    """One row per stage and timed step: the data of the ``dvc plots`` timing bars.
+
+    Parameters
+    ----------
+    timings : iterable of dict
+        The stage runner's timing files, ``{"stage": "hough_lines@ours", "seconds": {"total": 1.2, ...}}``.
 
     Returns
     -------
     list of dict
-        ``{"task", "method", "label": "<task>: <method>", "seconds"}``.
+        ``{"stage", "step", "label": "<stage> <step>", "seconds"}``, sorted by stage and step.
     """
     rows = []
-    for s in _ordered(summaries):
-        for method, seconds in s["timings"].items():
-            rows.append({"task": s["task"], "method": method, "label": f"{s['task']}: {method}",
-                         "seconds": float(seconds)})
+    for t in sorted(timings, key=lambda t: str(t.get("stage"))):
+        for step, seconds in sorted((t.get("seconds") or {}).items()):
+            if _is_number(seconds) and math.isfinite(seconds):
+                rows.append({"stage": str(t["stage"]), "step": step, "label": f"{t['stage']} {step}",
+                             "seconds": float(seconds)})
     return rows
 
 
@@ -249,24 +255,6 @@ def _table(title: str, columns: Sequence[str], rows: Sequence[Sequence[Any]]) ->
     return out
 
 
-def _timings(timings: Mapping[str, float]) -> list[str]:
-    if not timings:
-        return []
-    fastest = min(timings.values())
-    slowest = max(timings.values())
-    out = ["<h3>Timings</h3>", '<div class="tablewrap"><table>',
-           '<thead><tr><th scope="col">method</th><th scope="col">time</th><th scope="col">vs fastest</th>'
-           '<th scope="col"></th></tr></thead><tbody>']
-    for method, sec in sorted(timings.items(), key=lambda kv: kv[1]):
-        ratio = "\u2013" if fastest == 0 else f"{sec / fastest:.2f}\u00d7"
-        width = 0.0 if slowest == 0 else 100.0 * sec / slowest
-        out.append(f'<tr><td>{_e(method)}</td><td class="num">{_e(format_seconds(sec))}</td>'
-                   f'<td class="num">{_e(ratio)}</td><td class="barcell">'
-                   f'<span class="bar" style="width:{width:.1f}%"></span></td></tr>')
-    out.append("</tbody></table></div>")
-    return out
-
-
 def _section(s: Mapping[str, Any], base: str, sizes: Mapping[str, tuple[int, int]]) -> list[str]:
     task = s["task"]
     out = [f'<section id="task-{_e(task)}">', f"<h2>{_e(TASK_NAMES[task])}</h2>",
@@ -286,7 +274,6 @@ def _section(s: Mapping[str, Any], base: str, sizes: Mapping[str, tuple[int, int
         out.append("</div>")
     for table in s["tables"]:
         out += _table(table["title"], table["columns"], table["rows"])
-    out += _timings(s["timings"])
     out.append("</section>")
     return out
 

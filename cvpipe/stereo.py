@@ -817,3 +817,186 @@ def error_picture(disp: np.ndarray, truth: np.ndarray, clip: float = 4.0) -> np.
     pic[known & ~both] = (255, 80, 0)
     pic[~known] = (128, 128, 128)
     return pic
+
+
+# ------------------------------------------------------------------------------- pipeline results and report
+
+
+def metric_key(name: str) -> str:
+    """A pair name as a metrics key: no dots (DVC joins nested keys with dots) and never ``all``."""
+    key = str(name).replace(".", "_")
+    return "pair_all" if key == "all" else key
+
+
+def pair_result(disp: np.ndarray, max_disp: int, truth: np.ndarray | None = None) -> dict:
+    """The numbers of one disparity map: ``max_disp``, ``valid_fraction`` (share of all pixels with an estimate)
+    and, with ``truth``, ``bad_1`` / ``bad_2`` (see :func:`evaluate`), ``density`` and ``mean_error_px``; a value
+    that does not exist (no known truth pixel) is left out rather than NaN."""
+    out: dict = {"max_disp": int(max_disp), "valid_fraction": float(np.isfinite(disp).mean())}
+    if truth is not None:
+        ev = evaluate(disp, truth)
+        named = {f"bad_{t:g}": ev[f"bad_{float(t):.1f}"] for t in BAD_THRESHOLDS}
+        named.update(density=ev["density"], mean_error_px=ev["mean_error"])
+        out.update({k: float(v) for k, v in named.items() if np.isfinite(v)})
+    return out
+
+
+#: per-pair keys that need the truth, averaged over the pairs with truth in ``all``
+TRUTH_KEYS = tuple(f"bad_{t:g}" for t in BAD_THRESHOLDS) + ("density", "mean_error_px")
+
+
+def metrics_of(run: dict) -> dict:
+    """``{"stereo": {method: {"all": {...}, pair: {...}}}}`` from one ``stereo_disparity`` result ``{"method",
+    "pairs": {name: pair_result(...) + {"truth": bool}}}``; ``all`` holds ``pairs``, the mean ``valid_fraction``
+    and, over the pairs with truth, ``truth_pairs`` and the mean of each truth key."""
+    pairs = run["pairs"]
+    summary: dict = {"pairs": len(pairs)}
+    if pairs:
+        summary["valid_fraction"] = float(np.mean([r["valid_fraction"] for r in pairs.values()]))
+    with_truth = [r for r in pairs.values() if r["truth"]]
+    if with_truth:
+        summary["truth_pairs"] = len(with_truth)
+        for k in TRUTH_KEYS:
+            vals = [r[k] for r in with_truth if k in r]
+            if vals:
+                summary[k] = float(np.mean(vals))
+    per_pair = {metric_key(n): {k: (int(v) if isinstance(v, bool) else v) for k, v in r.items()}
+                for n, r in pairs.items()}
+    return {"stereo": {run["method"]: {"all": summary, **per_pair}}}
+
+
+def merge_dropped(runs: dict) -> list[dict]:
+    """The ``dropped`` lists of the methods' runs as one: an (item, reason) that every method dropped is listed
+    once, one that only some dropped names them (``"pair (opencv_bm)"``)."""
+    seen: dict[tuple[str, str], list[str]] = {}
+    for method, run in runs.items():
+        for d in run["dropped"]:
+            seen.setdefault((d["item"], d["reason"]), []).append(method)
+    return [{"item": item if len(ms) == len(runs) else f"{item} ({', '.join(ms)})", "reason": reason}
+            for (item, reason), ms in seen.items()]
+
+
+def _labelled(pic: np.ndarray, label: str, width: int) -> np.ndarray:
+    h = max(1, int(round(pic.shape[0] * width / pic.shape[1])))
+    bar = np.full((24, width, 3), 255, np.uint8)
+    cv2.putText(bar, label, (4, 17), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 1, cv2.LINE_AA)
+    return np.vstack([bar, cv2.resize(pic, (width, h), interpolation=cv2.INTER_AREA)])
+
+
+def comparison_picture(left: np.ndarray, disparities: dict, max_disp: int, truth: np.ndarray | None = None,
+                       error_clip: float = 4.0, width: int = 320) -> np.ndarray:
+    """One pair's methods side by side: the left image and each method's colour-mapped disparity; with ``truth`` a
+    second row with the true disparity and each method's error map (:func:`error_picture`).
+
+    Parameters
+    ----------
+    left : (H, W) or (H, W, 3) uint8
+        The left image.
+    disparities : dict
+        Label -> (H, W) float disparity (NaN = none), or None for a method that failed (a grey panel).
+    max_disp : int
+        The top of the colour scale (the pair's search range).
+    truth : (H, W) float, optional
+        True disparity (NaN = unknown).
+    error_clip : float
+        Absolute error (pixels) at which the error maps saturate.
+    width : int
+        Width of each panel in pixels.
+
+    Returns
+    -------
+    (rows * (h + 24), width * (1 + len(disparities)), 3) uint8 BGR
+    """
+    grey = np.full(left.shape[:2] + (3,), 96, np.uint8)
+    top = [_labelled(cv2.cvtColor(left, cv2.COLOR_GRAY2BGR) if left.ndim == 2 else left, "left image", width)]
+    for label, d in disparities.items():
+        top.append(_labelled(grey if d is None else colorize_disparity(d, max_disp), f"{label}" +
+                             (": failed" if d is None else ""), width))
+    rows = [np.hstack(top)]
+    if truth is not None:
+        bottom = [_labelled(colorize_disparity(truth, max_disp), "true disparity", width)]
+        for label, d in disparities.items():
+            bottom.append(_labelled(grey if d is None else error_picture(d, truth, error_clip),
+                                    f"{label} |error|", width))
+        rows.append(np.hstack(bottom))
+    return np.vstack(rows)
+
+
+def report_summary(runs: dict, pictures: list[dict], dropped: list[dict], error_clip: float) -> dict:
+    """The report page's summary of the stereo task (schema in ``cvpipe.report``).
+
+    Parameters
+    ----------
+    runs : dict
+        Method -> ``stereo_disparity`` result (``{"method", "pairs": {name: {...}}, "dropped"}``).
+    pictures : list of dict
+        ``{"path", "caption"}`` per pair picture, repo-relative paths.
+    dropped : list of dict
+        ``{"item", "reason"}`` for every input that was not processed (:func:`merge_dropped`).
+    error_clip : float
+        The saturation of the error maps (pixels), for the description.
+    """
+    none = "no ground truth"
+    names = list(dict.fromkeys(n for run in runs.values() for n in run["pairs"]))
+    truth_pairs = sorted({n for run in runs.values() for n, r in run["pairs"].items() if r["truth"]})
+
+    def pct(v):
+        return None if v is None else round(100.0 * v, 2)
+
+    per_method = []
+    for method, run in runs.items():
+        s = metrics_of(run)["stereo"][method]["all"]
+        acc = ([pct(s.get("bad_1")), pct(s.get("bad_2")), None if "mean_error_px" not in s else
+                round(s["mean_error_px"], 3), pct(s.get("density"))] if truth_pairs else [none] * 4)
+        per_method.append([method, f"{len(run['pairs'])} / {len(names)}", pct(s.get("valid_fraction")), *acc])
+    per_pair = []
+    for name in names:
+        for method, run in runs.items():
+            r = run["pairs"].get(name)
+            if r is None:
+                per_pair.append([name, method, None, "failed", "failed", "failed"])
+                continue
+            per_pair.append([name, method, r["max_disp"], pct(r["valid_fraction"]),
+                             pct(r.get("bad_2")) if r["truth"] else none,
+                             (round(r["mean_error_px"], 3) if "mean_error_px" in r else None) if r["truth"] else none])
+    tables = [
+        {"title": "Per method (means over the pairs)",
+         "columns": ["method", "pairs", "valid %", "bad-1.0 %", "bad-2.0 %", "mean error px", "density %"],
+         "rows": per_method},
+        {"title": "Per pair", "columns": ["pair", "method", "max_disp", "valid %", "bad-2.0 %", "mean error px"],
+         "rows": per_pair},
+    ]
+    if dropped:
+        tables.append({"title": "Not processed", "columns": ["input", "reason"],
+                       "rows": [[d["item"], d["reason"]] for d in dropped]})
+    if truth_pairs:
+        truth_note = (f"{len(truth_pairs)} of {len(names)} pairs have a true disparity ({', '.join(truth_pairs)}). "
+                      "A pixel is bad when its estimate is missing or off by more than the threshold, over all pixels "
+                      "with known truth; mean error is over pixels with an estimate; density is the share of known "
+                      f"pixels with an estimate. Error maps: white at {error_clip:g} px or more, blue = missing, "
+                      "grey = unknown truth.")
+    else:
+        truth_note = ("These pairs have no ground truth: the tables give the share of pixels with a (trusted) "
+                      "estimate, and the pictures show each method's disparity.")
+    return {
+        "task": "stereo",
+        "title": "Disparity of rectified pairs: our semi-global matching vs OpenCV BM / SGBM",
+        "description": (f"Every method searches the pair's disparity range (max_disp). {truth_note} Disparity "
+                        "pictures: turbo colour map from 0 to max_disp, black = no estimate. Times: `dvc plots "
+                        "show` (outputs/timings) and `cvpipe bench stereo`."),
+        "pictures": pictures,
+        "tables": tables,
+    }
+
+
+def quality_plots(runs: dict) -> dict[str, list[dict]]:
+    """``dvc plots`` rows per file: ``bad_2`` (pairs with truth) and ``valid_fraction`` (every pair), each row
+    ``{"pair", "method", "label", <value>}``."""
+    bad, valid = [], []
+    for method, run in runs.items():
+        for name, r in run["pairs"].items():
+            base = {"pair": name, "method": method, "label": f"{name} {method}"}
+            valid.append({**base, "valid_fraction": r["valid_fraction"]})
+            if "bad_2" in r:
+                bad.append({**base, "bad_2": r["bad_2"]})
+    return {"bad_2": bad, "valid_fraction": valid}

@@ -1,29 +1,48 @@
-"""Stage `defect_diff`: gain/bias-corrected, misregistration-tolerant difference of every registered probe."""
+"""Stage `defect_diff`: gain/bias-corrected, misregistration-tolerant difference of every registered probe (and of
+its direct alternative, when `defect_register` made one), in the reference frame; one .npz per probe and
+differences.json (photometric fit per probe, probes dropped so far)."""
 
-import argparse
 from pathlib import Path
 
-from tqdm import tqdm
+from cvpipe import datasets, defects, io
+from cvpipe.errors import EstimationError
+from stages._runner import Stage, run
 
-from cvpipe import defects, io
-from cvpipe.params import DefectDiffParams, load_section
 
-
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--reference", required=True, help="data/samples/defect/reference.png")
-    ap.add_argument("--registered", required=True, help="outputs/defect/register")
-    ap.add_argument("--out", required=True, help="folder for <probe>.npz")
-    ap.add_argument("--params", default="params.yaml")
-    args = ap.parse_args()
-    p = load_section(DefectDiffParams, "defect.diff", args.params)
-    ref = io.read_image(args.reference, "gray")
-    for f in tqdm(sorted(Path(args.registered).glob("*.npz")), desc="diff", disable=None):
-        reg = io.load_npz(f)
-        d = defects.difference(ref, reg["warped"], reg["valid"], p)
-        io.save_npz(Path(args.out) / f.name, diff=d.diff, valid=d.valid, gain=d.gain, bias=d.bias, noise=d.noise,
-                    contrast=d.contrast, H=reg["H"], probe_shape=reg["probe_shape"])
+def defect_diff(st: Stage) -> None:
+    p, reg_dir, out = st.params, Path(st.args.registered), Path(st.args.out)
+    inputs, _ = datasets.find_defect(st.args.images)
+    ref = io.read_image(inputs.reference, "gray")
+    registration = io.load_json(reg_dir / "registration.json")
+    fits = {}
+    for name, rec in st.progress(sorted(registration["probes"].items()), "defect diff"):
+        z = io.load_npz(reg_dir / f"{name}.npz")
+        try:
+            with st.timer("difference"):
+                d = defects.difference(ref, z["warped"], z["valid"], p)
+        except EstimationError as exc:
+            st.drop(rec["file"], str(exc))
+            continue
+        arrays, fit = d.to_arrays(), {"file": rec["file"], "primary": d.photometry()}
+        if "alt_H" in z:
+            try:
+                with st.timer("difference"):
+                    alt = defects.difference(ref, z["alt_warped"], z["alt_valid"], p)
+            except EstimationError as exc:  # only a second opinion: the probe goes on without it
+                fit["alternative_error"] = str(exc)
+            else:
+                arrays.update(alt.to_arrays("alt_"))
+                fit["alternative"] = alt.photometry()
+        io.save_npz(out / f"{name}.npz", **arrays)
+        fits[name] = fit
+    if not fits:
+        raise EstimationError("no registered probe could be compared with the reference: "
+                              + "; ".join(f"{d['item']}: {d['reason']}" for d in st.dropped))
+    io.save_json(out / "differences.json", {"probes": fits, "dropped": registration["dropped"] + st.dropped})
+    st.made(f"{len(fits)} difference maps -> {out}")
 
 
 if __name__ == "__main__":
-    main()
+    run(defect_diff, section="defect.diff",
+        args={"images": "the defect.data folder (its reference)", "registered": "defect_register output",
+              "out": "folder for <probe>.npz and differences.json"})

@@ -1,32 +1,41 @@
-"""Stage `defect_match`: match the reference's keypoints to every probe's, one .npz of index pairs per probe."""
+"""Stage `defect_match`: match the reference's keypoints to every probe's (from `defect_features`), one .npz of
+index pairs ``[i_reference, i_probe]`` per probe, and matches.json (counts, probes dropped)."""
 
-import argparse
 from pathlib import Path
 
-from tqdm import tqdm
-
-from cvpipe import io, matching
+from cvpipe import datasets, io, matching
+from cvpipe.errors import InputError
 from cvpipe.features import Features
-from cvpipe.params import MatchParams, load_section
+from stages._runner import Stage, run
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--features", required=True, help="outputs/defect/features (reference.npz, probes/*.npz)")
-    ap.add_argument("--out", required=True, help="folder for <probe>.npz")
-    ap.add_argument("--params", default="params.yaml")
-    args = ap.parse_args()
-    p = load_section(MatchParams, "defect.match", args.params)
-    feats = Path(args.features)
-    ref = Features.from_arrays(io.load_npz(feats / "reference.npz"))
+def defect_match(st: Stage) -> None:
+    p, feats, out = st.params, Path(st.args.features), Path(st.args.out)
+    inputs, dropped = datasets.find_defect(st.args.images)
+    for d in dropped:
+        st.drop(d["item"], d["reason"])
+    ref = Features.from_arrays(io.load_npz(feats / f"{inputs.reference.stem}.npz"))
+    # why defect_features skipped an image, when it says so
+    skipped = {d["item"]: d["reason"] for d in (io.load_json(feats / "dropped.json")
+                                                if (feats / "dropped.json").is_file() else [])}
     counts = {}
-    for f in tqdm(sorted((feats / "probes").glob("*.npz")), desc="match", disable=None):
-        probe = Features.from_arrays(io.load_npz(f))
-        idx = matching.match(ref.descriptors, probe.descriptors, p.ratio, p.cross_check, ref.binary)
-        io.save_npz(Path(args.out) / f.name, index=idx)
-        counts[f.stem] = len(idx)
-    io.save_json(Path(args.out) / "summary.json", {"matches": counts})
+    for probe in st.progress(inputs.probes, "defect match"):
+        path = feats / "probes" / f"{probe.name}.npz"
+        if not path.is_file():
+            st.drop(probe.path.name, skipped.get(f"probes/{probe.path.name}", "no keypoints from defect_features"))
+            continue
+        with st.timer("match"):
+            idx = matching.match(ref.descriptors, Features.from_arrays(io.load_npz(path)).descriptors, p.ratio,
+                                 p.cross_check, ref.binary)
+        io.save_npz(out / f"{probe.name}.npz", index=idx)
+        counts[probe.name] = len(idx)
+    if not counts:
+        raise InputError(f"{st.args.images}: no probe has keypoints to match")
+    io.save_json(out / "matches.json", {"matches": counts, "dropped": st.dropped})
+    st.made(f"{len(counts)} probes matched ({sum(counts.values())} matches) -> {out}")
 
 
 if __name__ == "__main__":
-    main()
+    run(defect_match, section="defect.match",
+        args={"images": "the defect.data folder", "features": "defect_features output",
+              "out": "folder for <probe>.npz and matches.json"})

@@ -1,53 +1,37 @@
-"""Stage `homography_estimate@<method>`: a robust homography A -> B for every matched sample pair."""
+"""Stage `homography_estimate@{ours,opencv_ransac,opencv_magsac}`: a robust homography A -> B for every matched
+pair: ``<pair>.npz`` (``H``, ``inliers``) and ``estimates.json`` (per pair H, matches, inliers; the pairs without an
+estimate under ``dropped`` with the reason). Times go to the uncached timings only."""
 
-import argparse
-import time
 from pathlib import Path
 
-from tqdm import tqdm
-
 from cvpipe import io
-from cvpipe.errors import EstimationError
-from cvpipe.homography import estimate
-from cvpipe.params import HomographyEstimateParams, load_section
+from cvpipe.errors import EstimationError, InputError
+from cvpipe.homography import METHODS, estimate
+from stages._runner import Stage, run
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--truth", required=True, help="data/samples/homography/truth.json (lists the pairs)")
-    ap.add_argument("--matches", required=True, help="folder of <pair>.npz with src, dst (homography_match)")
-    ap.add_argument("--method", required=True, help="ours, opencv_ransac or opencv_magsac")
-    ap.add_argument("--out", required=True)
-    ap.add_argument("--params", default="params.yaml")
-    args = ap.parse_args()
-    p = load_section(HomographyEstimateParams, "homography.estimate", args.params)
-    kw = dict(threshold=p.threshold, confidence=p.confidence, max_iters=p.max_iters)
-    pairs = io.load_json(args.truth)["pairs"]
-    out, results = Path(args.out), {}
-    loaded = {q["name"]: io.load_npz(Path(args.matches) / f"{q['name']}.npz") for q in pairs}
-    # warm-up (numba compilation, OpenCV initialisation) so that the recorded times are run times
-    for m in loaded.values():
-        if len(m["src"]) >= 4:
+def homography_estimate(st: Stage) -> None:
+    p, a = st.params, st.args
+    kw = dict(threshold=p.threshold, confidence=p.confidence, max_iters=p.max_iters, rng=p.seed)
+    files = sorted(Path(a.matches).glob("*.npz"))
+    if not files:
+        raise InputError(f"{a.matches}: no <pair>.npz matches (run homography_match)")
+    out, results = Path(a.out), {}
+    for f in st.progress(files, f"estimate {a.method}"):
+        m = io.load_npz(f)
+        with st.timer("first_call" if not results and not st.dropped else "estimates"):  # numba cache load first
             try:
-                estimate(args.method, m["src"], m["dst"], rng=p.seed, **kw)
-            except EstimationError:
-                pass
-            break
-    for q in tqdm(pairs, desc=f"estimate {args.method}", disable=None):
-        io.safe_name(q["name"], f"{args.truth}: pair name")
-        m = loaded[q["name"]]
-        t0 = time.perf_counter()
-        try:
-            fit = estimate(args.method, m["src"], m["dst"], rng=p.seed, **kw)
-        except (EstimationError, ValueError) as exc:
-            results[q["name"]] = {"H": None, "matches": len(m["src"]), "inliers": 0, "error": str(exc)}
-            continue
-        dt = time.perf_counter() - t0
-        io.save_npz(out / f"{q['name']}.npz", H=fit.H, inliers=fit.inliers)
-        results[q["name"]] = {"H": fit.H, "matches": len(m["src"]), "inliers": fit.num_inliers,
-                              "time_ms": 1e3 * dt}
-    io.save_json(out / "estimates.json", {"method": args.method, "pairs": results})
+                fit = estimate(a.method, m["src"], m["dst"], **kw)
+            except (EstimationError, InputError) as exc:
+                st.drop(f.stem, f"{len(m['src'])} matches: {exc}")
+                continue
+        io.save_npz(out / f.name, H=fit.H, inliers=fit.inliers)
+        results[f.stem] = {"H": fit.H, "matches": len(m["src"]), "inliers": fit.num_inliers}
+    io.save_json(out / "estimates.json", {"method": a.method, "pairs": results, "dropped": st.dropped})
+    st.made(f"{len(results)} of {len(files)} pairs estimated -> {out}")
 
 
 if __name__ == "__main__":
-    main()
+    run(homography_estimate, section="homography.estimate", item="method",
+        args={"matches": "homography_match output folder", "out": "folder for <pair>.npz and estimates.json"},
+        options={"method": {"required": True, "choices": sorted(METHODS)}})

@@ -1,32 +1,48 @@
-"""Stage `homography_match`: match the features of every sample pair (A -> B) and save the correspondences."""
+"""Stage `homography_match`: match the features of every pair of `homography.data` (A -> B), one ``<pair>.npz``
+(``index``, ``src``, ``dst``, ``size_a``, ``size_b``) per pair. Layout: pairs ``NAME_a.*`` / ``NAME_b.*``, or
+subfolders of two images (truth.json optional). Pairs that cannot be matched are listed in ``dropped.json``."""
 
-import argparse
 from pathlib import Path
 
-from cvpipe import io, matching
+from cvpipe import datasets, io, matching
+from cvpipe.errors import CvpipeError, InputError
 from cvpipe.features import Features
-from cvpipe.params import MatchParams, load_section
+from stages._runner import Stage, run
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--truth", required=True, help="data/samples/homography/truth.json (lists the pairs)")
-    ap.add_argument("--features", required=True, help="folder of per-image feature .npz files")
-    ap.add_argument("--out", required=True)
-    ap.add_argument("--params", default="params.yaml")
-    args = ap.parse_args()
-    p = load_section(MatchParams, "homography.match", args.params)
-    feats_dir, out = Path(args.features), Path(args.out)
-    counts = {}
-    for pair in io.progress(io.load_json(args.truth)["pairs"], "match"):
-        io.safe_name(pair["name"], f"{args.truth}: pair name")
-        fa = Features.from_arrays(io.load_npz(feats_dir / Path(pair["a"]).with_suffix(".npz")))
-        fb = Features.from_arrays(io.load_npz(feats_dir / Path(pair["b"]).with_suffix(".npz")))
-        idx = matching.match(fa.descriptors, fb.descriptors, p.ratio, p.cross_check, fa.binary)
-        io.save_npz(out / f"{pair['name']}.npz", index=idx, src=fa.xy[idx[:, 0]], dst=fb.xy[idx[:, 1]])
-        counts[pair["name"]] = len(idx)
-    io.save_json(out / "summary.json", {"matches": counts})
+def homography_match(st: Stage) -> None:
+    p, a = st.params, st.args
+    root, feats_dir, out = Path(a.images), Path(a.features), Path(a.out)
+    pairs, dropped = datasets.find_homography(root)
+    for d in dropped:
+        st.drop(d["item"], d["reason"])
+    # why an image has no features: the features stage's dropped.json (relative paths)
+    unreadable = {d["item"]: d["reason"] for d in io.load_json(feats_dir / "dropped.json")}
+    made = 0
+    for pair in st.progress(pairs, "homography match"):
+        rel = [pair.a.relative_to(root), pair.b.relative_to(root)]
+        lost = [r.as_posix() for r in rel if not (feats_dir / r.with_suffix(".npz")).is_file()]
+        if lost:
+            st.drop(pair.name, "; ".join(unreadable.get(r, f"{r}: no features") for r in lost))
+            continue
+        fa, fb = (io.load_npz(feats_dir / r.with_suffix(".npz")) for r in rel)
+        try:
+            A, B = Features.from_arrays(fa), Features.from_arrays(fb)
+            with st.timer("match"):
+                idx = matching.match(A.descriptors, B.descriptors, p.ratio, p.cross_check, A.binary)
+        except (CvpipeError, ValueError) as exc:
+            st.drop(pair.name, str(exc))
+            continue
+        io.save_npz(out / f"{pair.name}.npz", index=idx, src=A.xy[idx[:, 0]], dst=B.xy[idx[:, 1]],
+                    size_a=fa["image_size"], size_b=fb["image_size"])
+        made += 1
+    io.save_json(out / "dropped.json", st.dropped)
+    if not made:
+        raise InputError(f"{root}: no pair could be matched")
+    st.made(f"{made} pairs matched in {out}")
 
 
 if __name__ == "__main__":
-    main()
+    run(homography_match, section="homography.match",
+        args={"images": "the homography.data folder", "features": "homography_features output folder",
+              "out": "folder for <pair>.npz"})

@@ -1,48 +1,50 @@
-"""Stage `homography_report`: corner error against the truth, inliers and time per method, and one picture per
-pair (B warped onto A, checkerboard, one panel per method) so misalignment is visible."""
+"""Stage `homography_report`: corner error against the truth (pairs that have one), inliers and failures per method,
+one picture per pair (B warped onto A as a checkerboard: the truth, then each method), metrics (git-tracked) and the
+quality plots."""
 
-import argparse
 from pathlib import Path
 
-from cvpipe import io
-from cvpipe.homography import alignment_panel, report_summary, summarize_methods
-from cvpipe.params import HomographyReportParams, load_section
+from cvpipe import datasets, homography, io
+from stages._runner import Stage, run
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--truth", required=True, help="data/samples/homography/truth.json")
-    ap.add_argument("--images", required=True, help="folder with the pair images")
-    ap.add_argument("--estimates", required=True, nargs="+", help="estimate folders, one per method")
-    ap.add_argument("--metrics", required=True, help="output metrics JSON (per method)")
-    ap.add_argument("--out", required=True, help="folder for per-pair results and pictures")
-    ap.add_argument("--summary", required=True, help="summary JSON for the report page")
-    ap.add_argument("--params", default="params.yaml")
-    args = ap.parse_args()
-    p = load_section(HomographyReportParams, "homography.report", args.params)
-    truth = io.load_json(args.truth)["pairs"]
+def homography_report(st: Stage) -> None:
+    p, a = st.params, st.args
+    pairs, _ = datasets.find_homography(a.images)  # what it drops, homography_match recorded
+    dropped = list(io.load_json(Path(a.matches) / "dropped.json"))
     runs = {}
-    for folder in args.estimates:
+    for folder in a.estimates:
         est = io.load_json(Path(folder) / "estimates.json")
-        runs[est["method"]] = est["pairs"]
-    metrics, per_pair = summarize_methods(truth, runs, p.success_px)
-    out, pictures = Path(args.out), []
-    for q in truth:
-        io.safe_name(q["name"], f"{args.truth}: pair name")
-        a = io.read_image(Path(args.images) / q["a"], "color")
-        b = io.read_image(Path(args.images) / q["b"], "color")
-        panels = {"truth": q["H"]}
-        for method, pairs in runs.items():
-            err = per_pair[q["name"]][method]["corner_error_px"]
-            label = f"{method} {err:.2f} px" if err is not None else f"{method} failed"
-            panels[label] = pairs[q["name"]]["H"]
-        io.save_image(out / f"{q['name']}.png", alignment_panel(a, b, panels, p.checker_tiles))
-        pictures.append({"path": (out / f"{q['name']}.png").as_posix(),
-                         "caption": f"{q['name']}: B warped onto A (checkerboard): truth, then each method"})
-    io.save_json(out / "pairs.json", per_pair)
-    io.save_json(args.metrics, metrics)
-    io.save_json(args.summary, report_summary(metrics, per_pair, pictures, p.success_px))
+        runs[est["method"]] = est
+        dropped += [{"item": f"{d['item']} ({est['method']})", "reason": d["reason"]} for d in est["dropped"]]
+    matched = []
+    for q in pairs:
+        f = Path(a.matches) / f"{q.name}.npz"
+        if f.is_file():
+            m = io.load_npz(f)
+            matched.append({"name": q.name, "matches": len(m["src"]), "size_a": m["size_a"].tolist(), "H": q.H})
+    compared = homography.compare_methods(matched, runs, p.success_px)
+    out, pictures = Path(a.out), []
+    for q in st.progress([q for q in pairs if q.name in compared["per_pair"]], "homography pictures"):
+        img_a, img_b = io.read_image(q.a, "color"), io.read_image(q.b, "color")
+        estimates = {m: (r["pairs"][q.name]["H"] if q.name in r["pairs"] else None) for m, r in runs.items()}
+        panels, caption = homography.picture_panels(compared, q.name, q.H, estimates)
+        path = out / f"{q.name}.png"
+        io.save_image(path, homography.alignment_panel(img_a, img_b, panels, p.checker_tiles))
+        pictures.append({"path": path.as_posix(), "caption": caption})
+    io.save_json(a.metrics, homography.metrics_of(compared))
+    io.save_json(a.summary, homography.report_summary(compared, pictures, dropped))
+    for name, rows in homography.quality_plots(compared).items():
+        io.save_json(Path(a.plots) / f"{name}.json", rows)
+    st.made(f"{compared['pairs']} pairs compared ({compared['truth_pairs']} with ground truth), "
+            f"{len(pictures)} pictures in {out}")
+    for d in dropped:
+        st.drop(d["item"], d["reason"])
 
 
 if __name__ == "__main__":
-    main()
+    run(homography_report, section="homography.report",
+        args={"images": "the homography.data folder", "matches": "homography_match output (its dropped.json)",
+              "estimates": "+homography_estimate output folders, one per method", "out": "folder for the pictures",
+              "metrics": "metrics JSON (git-tracked)", "summary": "summary JSON for the report page",
+              "plots": "folder for dvc plots data"})

@@ -1,28 +1,32 @@
-"""Stage `hough_edges`: Canny edge map (PNG, 255 = edge) of every sample image, input of both Hough implementations."""
+"""Stage `hough_edges`: Canny edge map (PNG, 255 = edge) of every image of `hough.data`, input of both Hough
+implementations. Layout: the images directly in the folder (truth.json optional)."""
 
-import argparse
 from pathlib import Path
 
-from tqdm import tqdm
+from cvpipe import datasets, hough, io
+from cvpipe.errors import InputError
+from stages._runner import Stage, run
 
-from cvpipe import hough, io
-from cvpipe.params import HoughEdgesParams, load_section
 
-
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--images", required=True, help="folder of images (data/samples/hough)")
-    ap.add_argument("--out", required=True, help="folder for <name>.png edge maps")
-    ap.add_argument("--params", default="params.yaml")
-    args = ap.parse_args()
-    p = load_section(HoughEdgesParams, "hough.edges", args.params)
-    files = io.list_images(args.images)
-    for f in tqdm(files, desc="hough edges", disable=None):
-        gray = io.read_image(f, "gray")
+def hough_edges(st: Stage) -> None:
+    p, out = st.params, Path(st.args.out)
+    items, _ = datasets.find_hough(st.args.images)
+    made = 0
+    for it in st.progress(items, "hough edges"):
+        try:
+            gray = io.read_image(it.path, "gray")
+        except InputError as exc:
+            st.drop(it.path.name, str(exc))
+            continue
         edges = hough.canny_edges(gray, p.canny_low, p.canny_high, aperture=p.aperture, l2_gradient=p.l2_gradient,
                                   blur_sigma=p.blur_sigma)
-        io.save_image(Path(args.out) / f"{f.stem}.png", edges)
+        io.save_image(out / f"{it.name}.png", edges)
+        made += 1
+    io.save_json(out / "dropped.json", st.dropped)
+    if not made:
+        raise InputError(f"{st.args.images}: no readable image")
+    st.made(f"{made} edge maps in {out}")
 
 
 if __name__ == "__main__":
-    main()
+    run(hough_edges, section="hough.edges", args={"images": "the hough.data folder", "out": "folder for <name>.png"})

@@ -1,40 +1,30 @@
-"""Stage `hough_lines@{ours,opencv}`: standard Hough lines of every edge map, with the median time per image."""
+"""Stage `hough_lines@{ours,opencv}`: standard Hough lines of every edge map (the median time per image goes to the
+uncached timings)."""
 
-import argparse
 import math
-import time
-from pathlib import Path
-
-from tqdm import tqdm
 
 from cvpipe import hough, io
-from cvpipe.params import HoughLinesParams, load_section
+from stages._runner import Stage, run
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--edges", required=True, help="folder of edge maps (outputs/hough/edges)")
-    ap.add_argument("--impl", required=True, choices=sorted(hough.IMPLEMENTATIONS))
-    ap.add_argument("--out", required=True, help="JSON file: lines and seconds per image")
-    ap.add_argument("--params", default="params.yaml")
-    args = ap.parse_args()
-    p = load_section(HoughLinesParams, "hough.lines", args.params)
-    fn = hough.get_impl(args.impl)
-    kwargs = {"refine": p.refine} if args.impl == "ours" else {}
+def hough_lines(st: Stage) -> None:
+    p = st.params
+    fn = hough.get_impl(st.args.method)
+    kwargs = {"refine": p.refine} if st.args.method == "ours" else {}
     theta = math.radians(p.theta_deg)
-    images, first_call = [], None
-    for f in tqdm(io.list_images(args.edges), desc=f"hough lines {args.impl}", disable=None):
+    images = []
+    for f in st.progress(io.list_images(st.args.edges), f"hough lines {st.args.method}"):
         edges = io.read_image(f, "gray")
-        t0 = time.perf_counter()
-        lines = fn(edges, p.rho, theta, p.threshold, **kwargs)
-        if first_call is None:  # ours: includes numba's compilation or its cache load
-            first_call = time.perf_counter() - t0
-        seconds = hough.median_seconds(lambda: fn(edges, p.rho, theta, p.threshold, **kwargs), p.repeats)
-        images.append({"file": Path(f).name, "lines": lines.tolist(), "seconds": seconds})
-    io.save_json(args.out, {"impl": args.impl, "rho": p.rho, "theta": theta, "threshold": p.threshold,
-                            "refine": bool(kwargs.get("refine", False)), "first_call_seconds": first_call,
-                            "images": images})
+        with st.timer("first_call" if not images else "calls"):  # ours' first: numba compile or cache load
+            lines = fn(edges, p.rho, theta, p.threshold, **kwargs)
+        st.timings[f"median.{f.stem}"] = hough.median_seconds(
+            lambda: fn(edges, p.rho, theta, p.threshold, **kwargs), p.repeats)
+        images.append({"file": f.name, "lines": lines.tolist()})
+    io.save_json(st.args.out, {"impl": st.args.method, "rho": p.rho, "theta": theta, "threshold": p.threshold,
+                               "refine": bool(kwargs.get("refine", False)), "images": images})
+    st.made(f"{sum(len(i['lines']) for i in images)} lines in {len(images)} images -> {st.args.out}")
 
 
 if __name__ == "__main__":
-    main()
+    run(hough_lines, section="hough.lines", item="method", args={"edges": "folder of edge maps", "out": "JSON file"},
+        options={"method": {"required": True, "choices": sorted(hough.IMPLEMENTATIONS)}})

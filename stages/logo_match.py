@@ -1,46 +1,89 @@
-"""Stage `logo_match@det`: match every scene's cached features against the indexed gallery, one .npz per scene."""
+"""Stage `logo_match@det`: match every scene's features against the indexed gallery, one .npz per scene.
 
-import argparse
-import time
+Layout of `logo.data`: `gallery/` (one image per brand named after it, `<brand>.<ext>`, or one subfolder per brand,
+`<brand>/*.<ext>`, with several references) and `scenes/`; a truth.json is optional. Features come from
+`logo_features@det` (one .npz per image file, at the image's path). Writes `<scene>.npz`, `index.json` (the
+references in index order and the matched scenes) and `dropped.json`.
+"""
+
 from pathlib import Path
 
-from tqdm import tqdm
-
-from cvpipe import io, logos
-from cvpipe.features import Features
-from cvpipe.params import LogoMatchParams, load_section
-
-
-def load_gallery_features(folder: Path, params: LogoMatchParams) -> logos.Gallery:
-    """Gallery from cached feature files laid out like the images: <brand>.npz or <brand>/*.npz."""
-    refs = []
-    for f in sorted(folder.rglob("*.npz")):
-        brand = f.stem if f.parent == folder else f.relative_to(folder).parts[0]
-        arrays = io.load_npz(f)
-        w, h = (int(v) for v in arrays["image_size"])
-        refs.append(logos.Reference(brand, str(f), Features.from_arrays(arrays), (w, h)))
-    return logos.build_gallery(refs, params.min_features, params.reference_features, params.register_references)
+from cvpipe import datasets, io, logos
+from cvpipe.errors import CvpipeError, InputError
+from cvpipe.features import DETECTORS, Features
+from cvpipe.params import LogoMatchParams
+from stages._runner import Stage, run
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--gallery", required=True, help="folder of gallery feature .npz files")
-    ap.add_argument("--scenes", required=True, help="folder of scene feature .npz files")
-    ap.add_argument("--out", required=True)
-    ap.add_argument("--params", default="params.yaml")
-    args = ap.parse_args()
-    p = load_section(LogoMatchParams, "logo.match", args.params)
-    gallery = load_gallery_features(Path(args.gallery), p)
-    out, times = Path(args.out), {}
-    for f in tqdm(sorted(Path(args.scenes).glob("*.npz")), desc=f"match {gallery.detector}", disable=None):
-        scene = Features.from_arrays(io.load_npz(f))
-        t0 = time.perf_counter()
-        m = logos.match_scene(gallery, scene, p)
-        times[f.stem] = time.perf_counter() - t0
-        io.save_npz(out / f.name, **m.to_arrays())
-    io.save_json(out / "timings.json", {"match_s": times, "references": len(gallery.references),
-                                        "dropped": list(gallery.dropped)})
+def features_of(features: Path, root: Path, image: Path, reasons: dict[str, str]) -> dict | str:
+    """The cached feature arrays of ``image`` (under ``root``), or why there are none."""
+    rel = image.relative_to(root)
+    f = features / rel.with_suffix(".npz")
+    if f.is_file():
+        return io.load_npz(f)
+    return reasons.get(rel.as_posix(), reasons.get(image.name, "no features (logo_features did not process it)"))
+
+
+def feature_reasons(features: Path) -> dict[str, str]:
+    """``item -> reason`` of the features stage's ``dropped.json``, when it wrote one."""
+    f = features / "dropped.json"
+    return {d["item"]: d["reason"] for d in io.load_json(f)} if f.is_file() else {}
+
+
+def load_gallery(inputs: datasets.LogoInputs, root: Path, features: Path,
+                 params: LogoMatchParams) -> tuple[logos.Gallery, list[dict]]:
+    """The gallery indexed from the cached features, every reference file mapped to its brand (the brands in
+    sorted order, a brand's files in the order ``find_logo`` lists them); and the references left out, why."""
+    reasons, dropped, refs = feature_reasons(features), [], []
+    for brand in sorted(inputs.gallery):
+        for image in inputs.gallery[brand]:
+            name = image.relative_to(root).as_posix()
+            got = features_of(features, root, image, reasons)
+            if isinstance(got, str):
+                dropped.append({"item": name, "reason": got})
+                continue
+            w, h = (int(v) for v in got["image_size"])
+            refs.append(logos.Reference(brand, name, Features.from_arrays(got), (w, h)))
+    gallery = logos.build_gallery(refs, params.min_features, params.reference_features, params.register_references)
+    dropped += [{"item": n, "reason": f"fewer than {params.min_features} keypoints"} for n in gallery.dropped]
+    return gallery, dropped
+
+
+def logo_match(st: Stage) -> None:
+    root, features, out = Path(st.args.images), Path(st.args.features), Path(st.args.out)
+    inputs, found_dropped = datasets.find_logo(root)
+    for d in found_dropped:
+        st.drop(d["item"], d["reason"])
+    gallery, gallery_dropped = load_gallery(inputs, root, features, st.params)
+    for d in gallery_dropped:
+        st.drop(d["item"], d["reason"])
+    if gallery.detector != st.args.detector:
+        raise InputError(f"{features}: features of {gallery.detector!r}, expected {st.args.detector!r}")
+    reasons, matched = feature_reasons(features), []
+    for sc in st.progress(inputs.scenes, f"match {st.args.detector}"):
+        got = features_of(features, root, sc.path, reasons)
+        if isinstance(got, str):
+            st.drop(sc.path.relative_to(root).as_posix(), got)
+            continue
+        try:
+            with st.timer("match"):
+                m = logos.match_scene(gallery, Features.from_arrays(got), st.params)
+        except (CvpipeError, ValueError) as exc:
+            st.drop(sc.path.relative_to(root).as_posix(), str(exc))
+            continue
+        io.save_npz(out / f"{sc.name}.npz", **m.to_arrays())
+        matched.append(sc.name)
+    if not matched:
+        raise InputError(f"{root / 'scenes'}: no scene could be matched")
+    io.save_json(out / "index.json", {"detector": gallery.detector, "scenes": matched,
+                                      "references": [r.name for r in gallery.references]})
+    io.save_json(out / "dropped.json", st.dropped)
+    st.made(f"{len(matched)} scenes matched against {len(gallery.references)} references of "
+            f"{len(gallery.brands)} brands -> {out}")
 
 
 if __name__ == "__main__":
-    main()
+    run(logo_match, section="logo.match", item="detector",
+        args={"images": "the logo.data folder", "features": "logo_features@det output",
+              "out": "folder for <scene>.npz, index.json, dropped.json"},
+        options={"detector": {"required": True, "choices": sorted(DETECTORS)}})

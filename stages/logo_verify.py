@@ -1,67 +1,66 @@
-"""Stage `logo_verify@det`: homography verification and the brand decision per scene, metrics, PR curve (pr.json)."""
+"""Stage `logo_verify@det`: homography verification and the brand decision per scene; metrics (git-tracked) and the
+precision-recall curve over the scenes with ground truth (an empty curve when none has it).
 
-import argparse
-import math
-import time
+Writes `decisions.json` (one record per scene, see `cvpipe.logos.scene_record`), `<scene>.npz` with the inliers of
+the best plausible hypothesis, and `dropped.json` (what `logo_match` and this stage did not process, and why).
+"""
+
 from pathlib import Path
 
-from tqdm import tqdm
+from cvpipe import datasets, io, logos
+from cvpipe.errors import CvpipeError, InputError
+from cvpipe.features import DETECTORS, Features
+from stages._runner import Stage, run
+from stages.logo_match import load_gallery
 
-from cvpipe import io, logos
-from cvpipe.features import Features
-from cvpipe.params import LogoMatchParams, LogoVerifyParams, load_section
-from stages.logo_match import load_gallery_features
 
-
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--gallery", required=True, help="folder of gallery feature .npz files")
-    ap.add_argument("--scenes", required=True, help="folder of scene feature .npz files")
-    ap.add_argument("--matches", required=True, help="folder written by logo_match")
-    ap.add_argument("--truth", required=True, help="data/samples/logo/truth.json")
-    ap.add_argument("--out", required=True, help="folder for decisions.json and inlier pairs")
-    ap.add_argument("--metrics", required=True, help="metrics JSON file")
-    ap.add_argument("--params", default="params.yaml")
-    args = ap.parse_args()
-    mp = load_section(LogoMatchParams, "logo.match", args.params)
-    vp = load_section(LogoVerifyParams, "logo.verify", args.params)
-    gallery = load_gallery_features(Path(args.gallery), mp)
-    match_s = io.load_json(Path(args.matches) / "timings.json")["match_s"]
-    truth = {s["file"]: s for s in io.load_json(args.truth)["scenes"]}
-    out, records = Path(args.out), []
-    for name in tqdm(sorted(truth), desc=f"verify {gallery.detector}", disable=None):
-        stem = Path(name).stem
-        arrays = io.load_npz(Path(args.scenes) / f"{stem}.npz")
-        scene, size = Features.from_arrays(arrays), tuple(int(v) for v in arrays["image_size"])
-        t0 = time.perf_counter()
-        hyps = logos.verify(gallery, logos.Matches.from_arrays(io.load_npz(Path(args.matches) / f"{stem}.npz")),
-                            scene, size, vp, rng=0)
-        det = logos.decide(hyps, vp)
-        elapsed = time.perf_counter() - t0 + match_s[stem]
+def logo_verify(st: Stage) -> None:
+    a, mp, vp = st.args, st.sections["logo.match"], st.sections["logo.verify"]
+    root, out = Path(a.images), Path(a.out)
+    inputs, _ = datasets.find_logo(root)  # what it drops, logo_match has listed
+    gallery, _ = load_gallery(inputs, root, Path(a.features), mp)
+    index = io.load_json(Path(a.matches) / "index.json")
+    if index["references"] != [r.name for r in gallery.references]:
+        raise InputError(f"{a.matches}: matched against another gallery than {root / 'gallery'}; rerun logo_match")
+    scenes = {sc.name: sc for sc in inputs.scenes}
+    records = []
+    for name in st.progress(index["scenes"], f"verify {a.detector}"):
+        sc = scenes.get(name)
+        if sc is None:
+            st.drop(name, "matched, but no longer in the scenes folder; rerun logo_match")
+            continue
+        rel = sc.path.relative_to(root).with_suffix(".npz")
+        try:
+            arrays = io.load_npz(Path(a.features) / rel)
+            scene, size = Features.from_arrays(arrays), tuple(int(v) for v in arrays["image_size"])
+            matches = logos.Matches.from_arrays(io.load_npz(Path(a.matches) / f"{name}.npz"))
+            with st.timer("verify"):
+                det = logos.decide(logos.verify(gallery, matches, scene, size, vp, rng=0), vp)
+        except CvpipeError as exc:
+            st.drop(sc.path.relative_to(root).as_posix(), str(exc))
+            continue
         best = det.best
-        rec = {"scene": name, "brand": det.brand, "inliers": det.inliers,
-               "score": det.score if math.isfinite(det.score) else None,
-               "quad": None if det.quad is None else det.quad.tolist(), "truth": truth[name]["brand"],
-               "truth_quad": truth[name]["quad"], "best_brand": best.brand if best else None,
-               "reference": gallery.references[best.reference].name if best else None,
-               "quad_error_px": (logos.quad_error(det.quad, truth[name]["quad"], cyclic=True)
-                                 if det.brand and det.brand == truth[name]["brand"] else None),
-               "seconds": elapsed}
-        records.append(rec)
+        truth = (sc.brand, sc.quad) if sc.labelled else None
+        records.append(logos.scene_record(name, det, gallery.references[best.reference].name if best else None,
+                                          truth))
         if best is not None:
-            io.save_npz(out / f"{stem}.npz", pairs=best.pairs, H=best.H,
-                        gallery_xy=best.reference_xy,
+            io.save_npz(out / f"{name}.npz", pairs=best.pairs, H=best.H, gallery_xy=best.reference_xy,
                         scene_xy=scene.xy[best.pairs[:, 1]])
-    ev = logos.evaluate([r["truth"] for r in records], [r["best_brand"] for r in records],
-                        [r["score"] if r["score"] is not None else -math.inf for r in records], vp.score_threshold)
-    errs = [r["quad_error_px"] for r in records if r["quad_error_px"] is not None]
-    io.save_json(out / "decisions.json", {"detector": gallery.detector, "scenes": records})
-    io.save_json(args.metrics, {k: ev[k] for k in ("precision", "recall", "accuracy", "answered", "correct",
-                                                  "scenes", "positives")}
-                 | {"time_per_scene_s": sorted(r["seconds"] for r in records)[len(records) // 2],
-                    "quad_error_px_median": sorted(errs)[len(errs) // 2] if errs else None})
-    io.save_json(out / "pr.json", [dict(c, method=gallery.detector) for c in ev["curve"]])
+    if not records:
+        raise InputError(f"{root / 'scenes'}: no scene could be verified")
+    brands = sorted(inputs.gallery)
+    io.save_json(out / "decisions.json", {"detector": a.detector, "brands": brands, "scenes": records})
+    io.save_json(out / "dropped.json", io.load_json(Path(a.matches) / "dropped.json") + st.dropped)
+    io.save_json(a.metrics, logos.metrics_of(records, brands, a.detector, vp.score_threshold))
+    io.save_json(a.pr, logos.pr_rows(records, a.detector, vp.score_threshold))
+    found = sum(r["brand"] is not None for r in records)
+    st.made(f"{found} of {len(records)} scenes given a brand ({sum(r['labelled'] for r in records)} with ground "
+            f"truth) -> {out}")
 
 
 if __name__ == "__main__":
-    main()
+    run(logo_verify, section=["logo.verify", "logo.match"], item="detector",
+        args={"images": "the logo.data folder", "features": "logo_features@det output",
+              "matches": "logo_match@det output", "out": "folder for decisions.json, <scene>.npz, dropped.json",
+              "metrics": "metrics JSON (git-tracked)", "pr": "precision-recall rows for dvc plots"},
+        options={"detector": {"required": True, "choices": sorted(DETECTORS)}})

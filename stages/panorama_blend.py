@@ -1,44 +1,41 @@
-"""Stage `panorama_blend`: per set, gain compensation, seams and multi-band (or feather) blending of the canvas."""
+"""Stage `panorama_blend`: per set, gain compensation, seams and multi-band (or feather) blending of the canvas
+(`<out>/<set>.png`, `<set>_mask.png`, `<set>_seams.png`, `<set>.json`; a failed set is recorded in its JSON)."""
 
-import argparse
-import time
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from cvpipe import blending, io, warping
-from cvpipe.params import PanoramaBlendParams, load_section
+from stages import _panorama as pr
+from stages._runner import Stage, run
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--warp", required=True, help="folder of <set>/ from panorama_warp")
-    ap.add_argument("--out", required=True, help="folder for <set>.png, <set>_mask.png, <set>_seams.png, <set>.json")
-    ap.add_argument("--params", default="params.yaml")
-    args = ap.parse_args()
-    p = load_section(PanoramaBlendParams, "panorama.blend", args.params)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    for d in tqdm(sorted(x for x in Path(args.warp).iterdir() if x.is_dir()), desc="panorama blend", disable=None):
+def _blend(st: Stage, d: Path, meta: dict, out: Path) -> dict:
+    p, n = st.params, len(meta["corners"])
+    w = warping.Warped([io.read_image(d / f"warped_{k}.png", "color") for k in range(n)],
+                       [io.read_image(d / f"mask_{k}.png", "gray") for k in range(n)],
+                       [tuple(c) for c in meta["corners"]], tuple(meta["size"]), tuple(meta["origin"]))
+    with st.timer("blend"):
+        pano, mask, seams = blending.compose(w, p.blender, p.bands, p.gain_compensation)
+    gains = blending.gain_compensation(w) if p.gain_compensation else np.ones(n)
+    io.save_image(out / f"{d.name}.png", pano)
+    io.save_image(out / f"{d.name}_mask.png", mask.astype(np.uint8) * 255)
+    io.save_image(out / f"{d.name}_seams.png", seams.astype(np.uint8) * 255)
+    return {"ok": True, "gains": gains, "ghosting": blending.overlap_difference(w, gains),
+            "ghosting_without_gains": blending.overlap_difference(w)}
+
+
+def panorama_blend(st: Stage) -> None:
+    out, records = Path(st.args.out), []
+    for d in st.progress(sorted(x for x in Path(st.args.warp).iterdir() if x.is_dir()), "panorama blend"):
         meta = io.load_json(d / "warp.json")
-        result = {"ok": meta["ok"], "error": meta.get("error")}
-        if meta["ok"]:
-            n = len(meta["corners"])
-            w = warping.Warped([io.read_image(d / f"warped_{k}.png", "color") for k in range(n)],
-                               [io.read_image(d / f"mask_{k}.png", "gray") for k in range(n)],
-                               [tuple(c) for c in meta["corners"]], tuple(meta["size"]), tuple(meta["origin"]))
-            t0 = time.perf_counter()
-            pano, mask, seams = blending.compose(w, p.blender, p.bands, p.gain_compensation)
-            seconds = time.perf_counter() - t0
-            gains = blending.gain_compensation(w) if p.gain_compensation else np.ones(n)
-            result.update(seconds=seconds, gains=gains, ghosting=blending.overlap_difference(w, gains),
-                          ghosting_without_gains=blending.overlap_difference(w))
-            io.save_image(out / f"{d.name}.png", pano)
-            io.save_image(out / f"{d.name}_mask.png", mask.astype(np.uint8) * 255)
-            io.save_image(out / f"{d.name}_seams.png", seams.astype(np.uint8) * 255)
-        io.save_json(out / f"{d.name}.json", result)
+        rec = pr.step_record(meta, "panorama_blend", d.name, lambda: _blend(st, d, meta, out), st.drop)
+        io.save_json(out / f"{d.name}.json", rec)
+        records.append(rec)
+    out.mkdir(parents=True, exist_ok=True)
+    st.made(pr.step_summary(records, "panorama_blend", f"panoramas blended into {out}"))
 
 
 if __name__ == "__main__":
-    main()
+    run(panorama_blend, section="panorama.blend",
+        args={"warp": "panorama_warp output", "out": "folder for <set>.png, _mask.png, _seams.png, .json"})

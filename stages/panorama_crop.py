@@ -1,35 +1,35 @@
-"""Stage `panorama_crop`: per set, the largest axis-aligned rectangle of the blended panorama with no empty pixel."""
+"""Stage `panorama_crop`: per set, the largest axis-aligned rectangle of the blended panorama with no empty pixel
+(`<out>/<set>.png`, `<set>.json`; a failed set is recorded in its JSON)."""
 
-import argparse
-import time
 from pathlib import Path
 
-from tqdm import tqdm
-
 from cvpipe import blending, io
+from cvpipe.errors import EstimationError
+from stages import _panorama as pr
+from stages._runner import Stage, run
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--blend", required=True, help="folder of <set>.png/_mask.png/.json from panorama_blend")
-    ap.add_argument("--out", required=True, help="folder for <set>.png and <set>.json")
-    args = ap.parse_args()
-    src, out = Path(args.blend), Path(args.out)
+def _crop(st: Stage, src: Path, name: str, out: Path) -> dict:
+    pano = io.read_image(src / f"{name}.png", "color")
+    mask = io.read_image(src / f"{name}_mask.png", "gray") > 0
+    with st.timer("crop"):
+        x, y, w, h = blending.largest_rectangle(mask)
+    if w * h == 0:
+        raise EstimationError("no pixel of the panorama is covered by an image")
+    io.save_image(out / f"{name}.png", pano[y:y + h, x:x + w])
+    return {"ok": True, "crop": [x, y, w, h], "size": [w, h], "empty_share": float(1.0 - mask[y:y + h, x:x + w].mean()),
+            "empty_share_uncropped": float(1.0 - mask.mean())}
+
+
+def panorama_crop(st: Stage) -> None:
+    src, out, records = Path(st.args.blend), Path(st.args.out), []
+    for f in st.progress(sorted(src.glob("*.json")), "panorama crop"):
+        rec = pr.step_record(io.load_json(f), "panorama_crop", f.stem, lambda: _crop(st, src, f.stem, out), st.drop)
+        io.save_json(out / f"{f.stem}.json", rec)
+        records.append(rec)
     out.mkdir(parents=True, exist_ok=True)
-    for f in tqdm(sorted(src.glob("*.json")), desc="panorama crop", disable=None):
-        meta = io.load_json(f)
-        result = {"ok": meta["ok"], "error": meta.get("error")}
-        if meta["ok"]:
-            pano = io.read_image(src / f"{f.stem}.png", "color")
-            mask = io.read_image(src / f"{f.stem}_mask.png", "gray") > 0
-            t0 = time.perf_counter()
-            x, y, w, h = blending.largest_rectangle(mask)
-            result.update(seconds=time.perf_counter() - t0, crop=[x, y, w, h], size=[w, h],
-                          empty_share=float(1.0 - mask[y:y + h, x:x + w].mean()) if w * h else 1.0,
-                          empty_share_uncropped=float(1.0 - mask.mean()))
-            io.save_image(out / f"{f.stem}.png", pano[y:y + h, x:x + w])
-        io.save_json(out / f"{f.stem}.json", result)
+    st.made(pr.step_summary(records, "panorama_crop", f"cropped panoramas in {out}"))
 
 
 if __name__ == "__main__":
-    main()
+    run(panorama_crop, args={"blend": "panorama_blend output", "out": "folder for <set>.png and <set>.json"})

@@ -1,36 +1,63 @@
-"""Stage `panorama_features`: per set, every image shrunk to the registration resolution, then its features."""
+"""Stage `panorama_features`: per set of `panorama.data`, every image shrunk to the registration resolution, then
+its features. Layout: every subfolder is one set, its images in any order (truth.json optional). Writes
+`<out>/<set>/<image stem>.npz` and `<out>/dropped.json` (sets and images not used, with the reason)."""
 
-import argparse
-import time
 from pathlib import Path
 
-from tqdm import tqdm
+import numpy as np
 
-from cvpipe import io, panorama
-from cvpipe.params import PanoramaFeaturesParams, load_section
+from cvpipe import datasets, io, panorama
+from cvpipe.errors import InputError
+from stages._runner import Stage, run
+
+#: smallest side of an image the pipeline accepts (as `cvpipe.panorama.stitch`)
+MIN_SIDE = 16
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--images", required=True, help="folder with one sub-folder of photos per panorama set")
-    ap.add_argument("--out", required=True, help="folder for <set>/<image>.npz")
-    ap.add_argument("--params", default="params.yaml")
-    args = ap.parse_args()
-    p = load_section(PanoramaFeaturesParams, "panorama.features", args.params)
-    sets = sorted(d for d in Path(args.images).iterdir() if d.is_dir())
-    if not sets:
-        raise SystemExit(f"cvpipe: error: {args.images}: no set folders")
-    for d in tqdm(sets, desc="panorama features", disable=None):
-        files = io.list_images(d)
-        t0 = time.perf_counter()
-        images = [io.read_image(f, "gray") for f in files]
-        grays, sizes = panorama.working_images(images, p.work_megapix)
-        feats = panorama.detect_all(grays, p.detector, p.max_features)
-        seconds = time.perf_counter() - t0
-        for f, img, size, ft in zip(files, images, sizes, feats):
-            io.save_npz(Path(args.out) / d.name / f"{f.stem}.npz", **ft.to_arrays(), work_size=size,
-                        full_size=(img.shape[1], img.shape[0]), image_file=f.name, seconds=seconds / len(files))
+def _readable(st: Stage, s: datasets.PanoramaSet) -> list[tuple[Path, np.ndarray]]:
+    """The set's images that can be read and are large enough (the others are dropped with their reason)."""
+    got, stems = [], {}
+    for f in s.files:
+        try:
+            img = io.read_image(f, "gray")
+        except InputError as exc:
+            st.drop(f"{s.name}/{f.name}", str(exc))
+            continue
+        if min(img.shape) < MIN_SIDE:
+            st.drop(f"{s.name}/{f.name}", f"{img.shape[1]}x{img.shape[0]} pixels, expected at least "
+                                          f"{MIN_SIDE}x{MIN_SIDE}")
+        elif f.stem in stems:
+            st.drop(f"{s.name}/{f.name}", f"same name as {stems[f.stem]}; rename one")
+        else:
+            stems[f.stem] = f.name
+            got.append((f, img))
+    return got
+
+
+def panorama_features(st: Stage) -> None:
+    p, out = st.params, Path(st.args.out)
+    sets, dropped = datasets.find_panorama(st.args.images)
+    for d in dropped:
+        st.drop(d["item"], d["reason"])
+    done = 0
+    for s in st.progress(sets, "panorama features"):
+        got = _readable(st, s)
+        if len(got) < 2:
+            st.drop(s.name, f"{len(got)} usable image(s), a panorama needs at least 2")
+            continue
+        with st.timer("features"):
+            grays, sizes = panorama.working_images([img for _, img in got], p.work_megapix)
+            feats = panorama.detect_all(grays, p.detector, p.max_features)
+        for (f, img), size, ft in zip(got, sizes, feats):
+            io.save_npz(out / s.name / f"{f.stem}.npz", **ft.to_arrays(), work_size=size,
+                        full_size=(img.shape[1], img.shape[0]), image_file=f.name)
+        done += 1
+    io.save_json(out / "dropped.json", st.dropped)
+    if not done:
+        raise InputError(f"{st.args.images}: no panorama set with 2 or more usable images")
+    st.made(f"features of {done} sets in {out}")
 
 
 if __name__ == "__main__":
-    main()
+    run(panorama_features, section="panorama.features",
+        args={"images": "the panorama.data folder", "out": "folder for <set>/<image>.npz and dropped.json"})

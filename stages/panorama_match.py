@@ -1,36 +1,30 @@
-"""Stage `panorama_match`: per set, match every pair of images -> the match-confidence graph (.npz)."""
+"""Stage `panorama_match`: per set, match every candidate pair of images -> the match-confidence graph
+(`<out>/<set>.npz`)."""
 
-import argparse
-import time
 from pathlib import Path
-
-from tqdm import tqdm
 
 from cvpipe import io, panorama
 from cvpipe.features import Features
-from cvpipe.params import PanoramaMatchParams, load_section
+from stages._runner import Stage, run
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--features", required=True, help="folder of <set>/<image>.npz from panorama_features")
-    ap.add_argument("--out", required=True, help="folder for <set>.npz")
-    ap.add_argument("--params", default="params.yaml")
-    args = ap.parse_args()
-    p = load_section(PanoramaMatchParams, "panorama.match", args.params)
-    for d in tqdm(sorted(x for x in Path(args.features).iterdir() if x.is_dir()), desc="panorama match",
-                  disable=None):
+def panorama_match(st: Stage) -> None:
+    p, out = st.params, Path(st.args.out)
+    sets = sorted(x for x in Path(st.args.features).iterdir() if x.is_dir())
+    for d in st.progress(sets, "panorama match"):
         arrays = [io.load_npz(f) for f in sorted(d.glob("*.npz"))]
         feats = [Features.from_arrays(a) for a in arrays]
         sizes = [tuple(int(v) for v in a["work_size"]) for a in arrays]
-        t0 = time.perf_counter()
-        graph = panorama.match_graph(feats, sizes, ratio=p.ratio, ransac_threshold=p.ransac_threshold,
-                                     min_inliers=p.min_inliers, min_confidence=p.min_confidence,
-                                     candidates=p.candidates, refit_threshold=p.refit_threshold, rng=p.seed)
-        io.save_npz(Path(args.out) / f"{d.name}.npz", **graph.to_arrays(),
-                    files=[str(a["image_file"]) for a in arrays], full_sizes=[a["full_size"] for a in arrays],
-                    seconds=time.perf_counter() - t0)
+        with st.timer("match"):
+            graph = panorama.match_graph(feats, sizes, ratio=p.ratio, ransac_threshold=p.ransac_threshold,
+                                         min_inliers=p.min_inliers, min_confidence=p.min_confidence,
+                                         candidates=p.candidates, refit_threshold=p.refit_threshold, rng=p.seed)
+        io.save_npz(out / f"{d.name}.npz", **graph.to_arrays(), files=[str(a["image_file"]) for a in arrays],
+                    full_sizes=[a["full_size"] for a in arrays])
+    out.mkdir(parents=True, exist_ok=True)
+    st.made(f"match graphs of {len(sets)} sets in {out}")
 
 
 if __name__ == "__main__":
-    main()
+    run(panorama_match, section="panorama.match",
+        args={"features": "panorama_features output", "out": "folder for <set>.npz"})

@@ -1,11 +1,13 @@
-"""Stage `report`: render every outputs/<task>/summary.json into one HTML page, plus the timing bars for dvc plots."""
+"""Stage `report`: render every outputs/<task>/summary.json into one HTML page (outputs/report.html), and gather the
+stage runner's uncached timing files into the rows of the `dvc plots` timing bars (outputs/plots/timings.json,
+not a DVC output: it changes with every run)."""
 
-import argparse
 import os
 from pathlib import Path
 
 from cvpipe import io, report
-from cvpipe.errors import CvpipeError, InputError
+from cvpipe.errors import InputError
+from stages._runner import TIMINGS_DIR, Stage, run
 
 
 def load_summaries(outputs: Path, root: Path) -> tuple[list[dict], dict[str, tuple[int, int]]]:
@@ -27,27 +29,26 @@ def load_summaries(outputs: Path, root: Path) -> tuple[list[dict], dict[str, tup
     return summaries, sizes
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--outputs", default="outputs", help="folder searched for <task>/summary.json")
-    ap.add_argument("--out", default="outputs/report.html")
-    ap.add_argument("--timings", default="outputs/plots/timings.json", help="per-method timings for dvc plots")
-    args = ap.parse_args()
+def report_page(st: Stage) -> None:
     root = Path()  # summaries name their pictures relative to the repository root, where dvc runs stages
-    out = Path(args.out)
-    try:
-        summaries, sizes = load_summaries(Path(args.outputs), root)
-        base = Path(os.path.relpath(out.resolve().parent, Path.cwd())).as_posix()
-        page = report.build_html(summaries, base=base, sizes=sizes)
-        rows = report.timing_rows(summaries)
-    except CvpipeError as exc:
-        raise SystemExit(f"cvpipe: error: {exc}") from exc
+    out = Path(st.args.out)
+    summaries, sizes = load_summaries(Path(st.args.outputs), root)
+    base = Path(os.path.relpath(out.resolve().parent, Path.cwd())).as_posix()
+    page = report.build_html(summaries, base=base, sizes=sizes)
     with io.atomic_path(out) as tmp:
         tmp.write_text(page, encoding="utf-8")
-    io.save_json(args.timings, rows)
+    timings = []
+    for f in sorted(TIMINGS_DIR.glob("*.json")):
+        try:
+            timings.append(io.load_json(f))
+        except InputError as exc:
+            st.drop(f.name, str(exc))
+    io.save_json(st.args.timings, report.timing_rows(timings))
     ran = ", ".join(s["task"] for s in summaries) or "none yet"
-    print(f"report: {out} ({len(summaries)} of {len(report.TASKS)} tasks: {ran})")
+    st.made(f"{out} ({len(summaries)} of {len(report.TASKS)} tasks: {ran})")
 
 
 if __name__ == "__main__":
-    main()
+    run(report_page, name="report",
+        args={"outputs": "folder searched for <task>/summary.json", "out": "the HTML page",
+              "timings": "rows for the dvc plots timing bars (uncached)"})

@@ -1,26 +1,22 @@
-"""Stage `samples`: build the bundled sample data set into data/samples/<task>/ (images + truth.json)."""
+"""Stage `samples`: build the bundled sample data set into data/samples/<task>/ (images + truth.json).
 
-import argparse
+This folder is this stage's output: it is replaced whenever the stage reruns. Your own images go elsewhere
+(data/mine/..., see the README's "Your own images")."""
+
 import shutil
-import time
 from pathlib import Path
 
 from cvpipe import io, samples
-from cvpipe.params import SamplesParams, load_section
+from stages._runner import Stage, run
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--out", default="data/samples")
-    ap.add_argument("--params", default="params.yaml")
-    args = ap.parse_args()
-    p = load_section(SamplesParams, "samples", args.params)
-    t0 = time.perf_counter()
+def build_samples(st: Stage) -> None:
+    p = st.params
     sets = samples.build_all(p.seed, p.logo_scenes, p.logo_negatives)
-    out = Path(args.out)
+    out = Path(st.args.out)
     tmp = out.with_name(f".{out.name}.tmp")
     shutil.rmtree(tmp, ignore_errors=True)
-    for task, s in io.progress(sets.items(), "samples"):
+    for task, s in st.progress(sets.items(), "samples"):
         for name, img in s.images.items():
             io.save_image(tmp / task / name, img)
         for name, arrays in s.arrays.items():
@@ -29,8 +25,8 @@ def main() -> None:
     (tmp / "README.md").write_text(samples.README, encoding="utf-8")
     shutil.rmtree(out, ignore_errors=True)
     tmp.rename(out)  # the finished folder appears in one step
-    print(f"samples: {sum(len(s.images) for s in sets.values())} images in {time.perf_counter() - t0:.1f} s")
+    st.made(f"{sum(len(s.images) for s in sets.values())} images in {out}")
 
 
 if __name__ == "__main__":
-    main()
+    run(build_samples, name="samples", section="samples", args={"out": "the sample folder (data/samples)"})

@@ -1,43 +1,73 @@
-"""Stage `stereo_disparity@<method>`: disparity of the sample pair, its 16-bit PNG and its accuracy metrics."""
+"""Stage `stereo_disparity@{sgm,opencv_bm,opencv_sgbm}`: disparity of every pair of `stereo.data`:
+``<pair>/disparity.npy`` (float32, NaN = none), ``<pair>/disparity.png`` (16-bit, round(256 d), 0 = none) and
+``run.json`` (per pair max_disp, valid fraction and, with a truth.npz, the accuracy; what was dropped and why), plus
+the metrics file. Layout: every subfolder is one pair with ``left.*`` / ``right.*`` (a folder holding them itself is
+one pair); max_disp is the pair's own (truth.json ``max_disp`` or calib.txt ``ndisp``), else
+``stereo.disparity.max_disp``."""
 
-import argparse
 import dataclasses
-import time
 from pathlib import Path
 
 import numpy as np
 
-from cvpipe import io, stereo
+from cvpipe import datasets, io, stereo
+from cvpipe.errors import InputError
 from cvpipe.params import SECTIONS, load_section
+from stages._runner import Stage, run
+
+#: rows of the first pair run once before the timed calls (numba cache load / compilation, allocations)
+WARMUP_ROWS = 16
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--method", required=True, choices=sorted(stereo.METHODS))
-    ap.add_argument("--samples", required=True, help="data/samples/stereo (left.png, right.png, truth.npz/.json)")
-    ap.add_argument("--out", required=True, help="folder for disparity.npy, disparity.png and metrics.json")
-    ap.add_argument("--params", default="params.yaml")
-    args = ap.parse_args()
-    section = f"stereo.{args.method}"
-    options = dataclasses.asdict(load_section(SECTIONS[section], section, args.params))
-    samples, out = Path(args.samples), Path(args.out)
-    left, right = io.read_image(samples / "left.png"), io.read_image(samples / "right.png")
-    truth = io.load_npz(samples / "truth.npz")["disparity"]
-    max_disp = int(io.load_json(samples / "truth.json")["max_disp"])
+def read_truth(path: Path, shape: tuple[int, ...]) -> np.ndarray:
+    """The ``disparity`` array of a pair's truth.npz, checked against the left image's size."""
+    arrays = io.load_npz(path)
+    if "disparity" not in arrays:
+        raise InputError(f"{path}: field `disparity` is missing")
+    truth = arrays["disparity"].astype(np.float32)
+    if truth.shape != shape:
+        raise InputError(f"{path}: field `disparity` has shape {truth.shape}, the left image is {shape}")
+    return truth
 
-    t0 = time.perf_counter()
-    stereo.compute_disparity(left, right, max_disp, args.method, **options)  # warm-up: numba cache load, allocations
-    t1 = time.perf_counter()
-    disp = stereo.compute_disparity(left, right, max_disp, args.method, **options)
-    t2 = time.perf_counter()
 
-    with io.atomic_path(out / "disparity.npy") as tmp:
-        with open(tmp, "wb") as fh:
-            np.save(fh, disp.astype(np.float32), allow_pickle=False)
-    io.save_image(out / "disparity.png", stereo.to_png16(disp))
-    io.save_json(out / "metrics.json", {"method": args.method, "max_disp": max_disp, **stereo.evaluate(disp, truth),
-                                        "seconds": t2 - t1, "first_call_seconds": t1 - t0})
+def stereo_disparity(st: Stage) -> None:
+    a, method = st.args, st.args.method
+    options = dataclasses.asdict(load_section(SECTIONS[f"stereo.{method}"], f"stereo.{method}", a.params))
+    pairs, dropped = datasets.find_stereo(a.pairs)
+    for d in dropped:
+        st.drop(d["item"], d["reason"])
+    out, results = Path(a.out), {}
+    for pair in st.progress(pairs, f"disparity {method}"):
+        max_disp = pair.max_disp or st.params.max_disp
+        try:
+            left, right = io.read_image(pair.left), io.read_image(pair.right)
+            if not results:
+                with st.timer("warmup"):
+                    stereo.compute_disparity(left[:WARMUP_ROWS], right[:WARMUP_ROWS], max_disp, method, **options)
+            with st.timer(f"disparity {pair.name}"):
+                disp = stereo.compute_disparity(left, right, max_disp, method, **options)
+        except (InputError, ValueError) as exc:
+            st.drop(pair.name, str(exc))
+            continue
+        truth = read_truth(pair.truth, disp.shape) if pair.truth is not None else None
+        with io.atomic_path(out / pair.name / "disparity.npy") as tmp:
+            with open(tmp, "wb") as fh:
+                np.save(fh, disp.astype(np.float32), allow_pickle=False)
+        try:
+            io.save_image(out / pair.name / "disparity.png", stereo.to_png16(disp))
+        except ValueError as exc:  # disparities of 256 px or more: the npy has them
+            st.drop(f"{pair.name}/disparity.png", str(exc))
+        results[pair.name] = {**stereo.pair_result(disp, max_disp, truth), "truth": truth is not None}
+    result = {"method": method, "pairs": results, "dropped": st.dropped}
+    io.save_json(out / "run.json", result)
+    io.save_json(a.metrics, stereo.metrics_of(result))
+    if not results:
+        raise InputError(f"{a.pairs}: no pair could be processed")
+    st.made(f"{len(results)} disparity maps in {out}")
 
 
 if __name__ == "__main__":
-    main()
+    run(stereo_disparity, section="stereo.disparity", item="method",
+        args={"pairs": "the stereo.data folder", "out": "folder for <pair>/disparity.npy|png and run.json",
+              "metrics": "metrics JSON (git-tracked)"},
+        options={"method": {"required": True, "choices": sorted(stereo.METHODS)}})

@@ -236,16 +236,23 @@ def test_safe_name_keeps_plain_names():
     assert io.safe_name("probe_01.png", "probe") == "probe_01.png"
 
 
-def test_homography_match_stage_refuses_a_path_as_pair_name(tmp_path):
-    truth = tmp_path / "truth.json"
-    truth.write_text(json.dumps({"pairs": [{"name": "../../../../../tmp/x", "a": "a.jpg", "b": "b.jpg"}]}))
-    out = tmp_path / "deep" / "er" / "out"
-    proc = subprocess.run([sys.executable, "-m", "stages.homography_match", "--truth", str(truth), "--features",
-                           str(tmp_path / "features"), "--out", str(out), "--params", str(ROOT / "params.yaml")],
-                          capture_output=True, text=True, env=ENV, cwd=ROOT)
-    assert proc.returncode != 0
-    assert "not a plain file name" in proc.stderr and "../../../../../tmp/x" in proc.stderr
-    assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*")) == ["truth.json"]
+def test_pair_names_come_from_file_names_so_truth_cannot_redirect_outputs(tmp_path):
+    """A truth.json ``name`` of ``../../x`` names no pair: the pairs are named after files and folders
+    (cvpipe.datasets), and a truth entry only adds ground truth to a pair of that name."""
+    from cvpipe import datasets
+
+    t = texture(120, 200, seed=4)
+    for name in ("p_a.png", "p_b.png"):
+        cv2.imwrite(str(tmp_path / name), t[:, :160])
+    (tmp_path / "truth.json").write_text(json.dumps({"pairs": [
+        {"name": "../../../../../tmp/x", "a": "p_a.png", "b": "p_b.png", "H": np.eye(3).tolist()}]}))
+    try:
+        pairs, _ = datasets.find_homography(tmp_path)
+    except errors.InputError as exc:  # refusing the truth file is as good
+        assert "../../../../../tmp/x" in str(exc) or "truth" in str(exc)
+        return
+    for p in pairs:
+        assert io.safe_name(p.name, "pair name") == p.name
 
 
 # --------------------------------------------------------------------------------- item 5: output suffixes

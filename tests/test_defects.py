@@ -82,13 +82,42 @@ def test_inserted_defect_is_found_where_it_was_put(reference):
     assert r.score > 0
 
 
-def test_pipeline_registration_is_the_one_inspect_uses(reference):
+def test_the_steps_one_by_one_give_what_inspect_gives(reference):
+    """The DVC stages run register -> warp -> difference -> regions (and the direct alternative -> choose) one by
+    one, storing arrays between them; the chain must give inspect()'s verdict, score, regions and H exactly."""
     part = reference.copy()
     cv2.circle(part, (90, 90), 7, (230, 230, 230), -1, cv2.LINE_AA)
-    probe = make_probe(part, motion(-2.0, 1.02, (4.0, 7.0)), seed=9)
-    r = defects.inspect(reference, probe)
-    reg = defects.register_for_inspection(reference, probe)
-    assert reg.method == r.registration.method and np.array_equal(reg.H, r.registration.H)
+    for probe in (make_probe(part, motion(-2.0, 1.02, (4.0, 7.0)), seed=9),
+                  make_probe(reference, motion(1.0, 0.98, (-6.0, 3.0)), seed=10)):
+        r = defects.inspect(reference, probe)
+        ref, prb = io.to_gray(reference), io.to_gray(probe)
+        reg = defects.register(ref, prb)
+        found = []
+        for g in [reg] + ([defects.register_direct(ref, prb, matches=reg.matches, inliers=reg.inliers)]
+                          if defects.wants_alternative(reg) else []):
+            d = defects.difference(ref, *defects.warp_probe(prb, g.H, ref.shape))
+            d = defects.Difference.from_arrays(d.to_arrays("alt_"), "alt_")  # as stored between the stages
+            found.append(defects.find_regions(d, g.H, prb.shape))
+        chosen = defects.choose(found[0], found[1] if len(found) > 1 else None)
+        assert (chosen.verdict, chosen.score) == (r.verdict, r.score)
+        assert np.array_equal(chosen.probe_regions, r.probe_regions)
+        H = reg.H if chosen is found[0] else defects.register_direct(ref, prb).H
+        assert np.array_equal(H, r.registration.H)
+
+
+def test_choose_keeps_the_first_unless_a_faulty_one_has_a_lower_scoring_alternative():
+    def result(verdict, score):
+        return defects.Inspection(verdict, score, np.zeros((0, 4)), np.zeros((0, 4)), np.zeros(0), 10.0)
+
+    faulty, lower, higher = result("faulty", 50.0), result("faulty", 20.0), result("faulty", 80.0)
+    perfect = result("perfect", 0.0)
+    assert defects.choose(faulty, lower) is lower and defects.choose(faulty, perfect) is perfect
+    assert defects.choose(faulty, higher) is faulty and defects.choose(faulty, None) is faulty
+    assert defects.choose(perfect, result("perfect", 0.0)) is perfect  # a perfect probe never asks
+    reg = defects.Registration(np.eye(3), np.eye(3), 50, 40, 0.99, "features")
+    assert defects.wants_alternative(reg)
+    assert not defects.wants_alternative(reg, DefectRegisterParams(direct_fallback=False))
+    assert not defects.wants_alternative(replace(reg, method="direct"))
 
 
 @pytest.mark.parametrize("seed, rot, shift, gain, bias", [
@@ -243,6 +272,47 @@ def test_evaluate_counts_errors_and_false_alarms():
         defects.evaluate(results, truth + [{"file": "d.png", "verdict": "perfect", "boxes": []}])
 
 
+def test_report_metrics_are_numbers_per_probe_and_score_only_probes_with_truth():
+    from cvpipe import defects_report as rep
+
+    records = [{"probe": "a.png", "verdict": "faulty", "score": 40.0, "regions": [[10, 10, 30, 30]],
+                "H": np.eye(3).tolist(), "method": "features"},
+               {"probe": "b.v2.png", "verdict": "perfect", "score": 0.0, "regions": [], "H": np.eye(3).tolist(),
+                "method": "direct"},
+               {"probe": "c.png", "verdict": None, "score": None, "regions": [], "H": None, "error": "blank"}]
+    shift = np.array([[1, 0, 2.0], [0, 1, 0], [0, 0, 1]])
+    truth = {"a.png": {"verdict": "faulty", "boxes": np.array([[10.0, 10, 30, 30], [50, 50, 60, 60]]), "H": shift},
+             "c.png": {"verdict": "perfect", "boxes": np.zeros((0, 4)), "H": None}}
+    ev = rep.evaluate_records(records, truth, (100, 100))
+    m = rep.metrics_of(records, ev)["defect"]
+    assert set(m) == {"all", "a", "b_v2", "c"}  # stems, no dots: DVC splits metric keys at dots
+    assert all(isinstance(v, (int, float)) and not isinstance(v, bool) for d in m.values() for v in d.values())
+    # a: one of its two true boxes found exactly, the other missed -> mean best IoU 0.5; H off by 2 px everywhere
+    assert m["a"]["correct"] == 1 and m["a"]["box_iou"] == pytest.approx(0.5)
+    assert m["a"]["registration_corner_error_px"] == pytest.approx(2.0)
+    assert "correct" not in m["b_v2"] and m["b_v2"]["faulty"] == 0  # no truth: nothing scored
+    assert m["c"] == {"inspected": 0, "correct": 0}  # not inspected counts as wrong
+    assert m["all"]["accuracy"] == 0.5 and m["all"]["truth_probes"] == 2 and m["all"]["direct_registrations"] == 1
+    assert rep.confusion_rows(records, truth) == [{"probe": "a.png", "actual": "faulty", "predicted": "faulty"},
+                                                  {"probe": "c.png", "actual": "perfect",
+                                                   "predicted": "not inspected"}]
+    assert [r["probe"] for r in rep.score_rows(records)] == ["a.png", "b.v2.png"]
+    no_truth = rep.metrics_of(records, rep.evaluate_records(records, {}, (100, 100)))["defect"]
+    assert "accuracy" not in no_truth["all"] and "correct" not in no_truth["a"]
+
+
+def test_montage_keeps_each_picture_whole_in_its_tile():
+    from cvpipe import defects_report as rep
+
+    wide = np.full((50, 200, 3), 255, np.uint8)
+    out = rep.montage([wide, wide, wide], cols=2, width=400)
+    assert out.shape == (400, 400, 3)  # two rows of two 200 px tiles (the fourth empty)
+    # the 4:1 picture fills its tile's width and a quarter of its height: not stretched
+    assert out[:50, :200].min() == 255 and out[51:200, :200].max() == 0 and out[200:, 200:].max() == 0
+    with pytest.raises(ValueError, match="`images` must hold at least one image"):
+        rep.montage([], 3)
+
+
 # --------------------------------------------------------------------------------------------- command line
 
 
@@ -313,3 +383,102 @@ def test_deeppcb_pair_warped_both_ways(data_root):
     assert counts.tp >= 0.8 * len(boxes) and counts.fp <= 2
     perfect, _, _ = deeppcb_probe(ref, np.zeros((0, 4)), rng)
     assert defects.inspect(ref, perfect, params).verdict == "perfect"
+
+
+# --------------------------------------------------------------------------------------------- DVC stages
+
+
+def _run_stages(root, folder, out, params):
+    """The defect stages of dvc.yaml, in order, on ``folder`` (cwd ``out``: the runner's timings land there)."""
+    import os
+    import subprocess
+    import sys
+
+    from pathlib import Path
+
+    o = Path("outputs", "defect")  # relative, as in dvc.yaml: the summary's picture paths must be
+    steps = [
+        ["stages.features", "--images", folder, "--out", o / "features", "--section", "defect.features"],
+        ["stages.defect_match", "--images", folder, "--features", o / "features", "--out", o / "matches"],
+        ["stages.defect_register", "--images", folder, "--features", o / "features", "--matches", o / "matches",
+         "--out", o / "register"],
+        ["stages.defect_diff", "--images", folder, "--registered", o / "register", "--out", o / "diff"],
+        ["stages.defect_regions", "--diff", o / "diff", "--registration", o / "register" / "registration.json",
+         "--out", o / "results.json"],
+        ["stages.defect_report", "--images", folder, "--results", o / "results.json", "--registration",
+         o / "register" / "registration.json", "--diff", o / "diff", "--out", o],
+    ]
+    env = dict(os.environ, PYTHONPATH=str(root))
+    for module, *args in steps:
+        subprocess.run([sys.executable, "-m", module, *map(str, args), "--params", str(params)], cwd=out, env=env,
+                       check=True, capture_output=True, text=True)
+    return out / o
+
+
+@pytest.mark.slow
+def test_stages_give_inspect_results_drop_the_unregistrable_probe_and_rerun_identically(reference, tmp_path):
+    from pathlib import Path
+
+    from cvpipe.report import validate_summary
+
+    root = Path(__file__).resolve().parents[1]
+    folder = tmp_path / "mine"
+    part = reference.copy()
+    cv2.ellipse(part, (200, 120), (9, 6), 30, 0, 360, (25, 25, 35), -1, cv2.LINE_AA)
+    H_faulty, H_perfect = motion(2.5, 1.03, (6.0, -9.0)), motion(-1.5, 0.98, (-5.0, 4.0))
+    probes = {"faulty.png": make_probe(part, H_faulty, seed=1), "perfect.png": make_probe(reference, H_perfect, 2),
+              "blank.png": np.full((SIZE, SIZE, 3), 90, np.uint8)}
+    io.save_image(folder / "reference.png", reference)
+    for name, img in probes.items():
+        io.save_image(folder / "probes" / name, img)
+    true_box = defects.map_boxes([[190, 111, 210, 129]], H_faulty)
+    io.save_json(folder / "truth.json", {"probes": [
+        {"file": "faulty.png", "verdict": "faulty", "boxes": true_box, "H": H_faulty},
+        {"file": "perfect.png", "verdict": "perfect", "boxes": [], "H": H_perfect}]})  # blank.png: no truth
+    o = _run_stages(root, folder, tmp_path, root / "params.yaml")
+
+    params = defects.load_inspect_params(root / "params.yaml")
+    records = {r["probe"]: r for r in json.loads((o / "results.json").read_text())}
+    for name in ("faulty.png", "perfect.png"):  # the stage chain is inspect(), step by step
+        # read as the stages read them (the decoder's grey conversion can differ from cv2.cvtColor by 1 level)
+        r = defects.inspect(io.read_image(folder / "reference.png", "gray"),
+                            io.read_image(folder / "probes" / name, "gray"), params)
+        rec = records[name]
+        assert (rec["verdict"], rec["score"]) == (r.verdict, r.score)
+        assert np.array_equal(np.reshape(rec["regions"], (-1, 4)), r.probe_regions)
+        assert np.array_equal(rec["H"], r.registration.H)
+    assert records["blank.png"]["verdict"] is None and "blank" in records["blank.png"]["error"]
+
+    summary = validate_summary(json.loads((o / "summary.json").read_text()))
+    not_processed = [t for t in summary["tables"] if t["title"] == "Not processed"]
+    assert [row[0] for row in not_processed[0]["rows"]] == ["blank.png"]
+    assert "2 of 3 probes have ground truth" in summary["description"]
+    metrics = json.loads((o / "metrics.json").read_text())["defect"]
+    leaves = [v for m in metrics.values() for v in m.values()]
+    assert all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in leaves)
+    assert metrics["faulty"]["faulty"] == 1 and metrics["perfect"]["faulty"] == 0
+    assert metrics["blank"] == {"inspected": 0}
+    assert metrics["all"]["accuracy"] == 1.0 and metrics["all"]["truth_probes"] == 2
+    # the found blob is the inserted one (same tolerance as test_inserted_defect_is_found_where_it_was_put)
+    assert metrics["faulty"]["box_iou"] >= 0.4
+    # ECC registration lands well under a pixel over the frame (as in the unit tests)
+    assert metrics["faulty"]["registration_corner_error_px"] < 0.5
+    confusion = json.loads((o / "plots" / "confusion.json").read_text())
+    assert confusion == [{"actual": "faulty", "predicted": "faulty", "probe": "faulty.png"},
+                         {"actual": "perfect", "predicted": "perfect", "probe": "perfect.png"}]
+    assert "timings" not in summary and (tmp_path / "outputs" / "timings" / "defect_register.json").is_file()
+
+    # a rerun reproduces every cached output byte for byte (timings live apart, in outputs/timings)
+    cached = [p for p in sorted(o.rglob("*")) if p.is_file()]
+    before = {p: p.read_bytes() for p in cached}
+    _run_stages(root, folder, tmp_path, root / "params.yaml")
+    assert [p for p in cached if p.read_bytes() != before[p]] == []
+
+    # without a truth file everything still runs; no accuracy anywhere, nothing to plot in the confusion matrix
+    (folder / "truth.json").unlink()
+    o = _run_stages(root, folder, tmp_path, root / "params.yaml")
+    metrics = json.loads((o / "metrics.json").read_text())["defect"]
+    assert "accuracy" not in metrics["all"] and "correct" not in metrics["faulty"]
+    assert json.loads((o / "plots" / "confusion.json").read_text()) == []
+    summary = json.loads((o / "summary.json").read_text())
+    assert "no ground truth" in summary["description"]

@@ -15,7 +15,9 @@ import pytest
 from cvpipe import cli, io
 from cvpipe.bench import homography as bench
 from cvpipe.errors import InputError
-from cvpipe.homography import alignment_checkerboard, alignment_panel, summarize_methods, transform_points
+from cvpipe.homography import (alignment_checkerboard, alignment_panel, compare_methods, metrics_of, quality_plots,
+                               transform_points)
+from cvpipe.report import validate_summary
 from cvpipe.metrics import corner_error
 
 H_AB = np.array([[0.95, 0.08, 20.0], [-0.06, 0.97, 15.0], [1.2e-4, -6e-5, 1.0]])
@@ -77,21 +79,34 @@ def test_checkerboard_shows_b_only_where_it_covers_a():
         alignment_checkerboard(a, b, np.eye(2))
 
 
-def test_summarize_methods():
-    truth = [{"name": "p1", "H": np.eye(3).tolist(), "size_a": [100, 50]},
-             {"name": "p2", "H": np.eye(3).tolist(), "size_a": [100, 50]}]
+def test_compare_methods_scores_truth_pairs_and_counts_failures():
+    pairs = [{"name": "p1", "matches": 12, "size_a": [100, 50], "H": np.eye(3)},
+             {"name": "p2", "matches": 9, "size_a": [100, 50], "H": np.eye(3)},
+             {"name": "p.3", "matches": 20, "size_a": [100, 50], "H": None}]
     off = [[1, 0, 4.0], [0, 1, 3.0], [0, 0, 1]]  # every corner 5 px away
-    runs = {"m": {"p1": {"H": np.eye(3), "inliers": 10, "matches": 12, "time_ms": 1.0},
-                  "p2": {"H": off, "inliers": 6, "matches": 9, "time_ms": 3.0}},
-            "f": {"p1": {"H": None, "inliers": 0, "matches": 3}, "p2": {"H": np.eye(3), "inliers": 7, "matches": 9,
-                                                                        "time_ms": 2.0}}}
-    metrics, per_pair = summarize_methods(truth, runs, success_px=3.0)
-    assert metrics["m"]["median_corner_error_px"] == pytest.approx(2.5)
-    assert metrics["m"]["pairs_within"] == 1 and metrics["m"]["success_rate"] == 0.5
-    assert metrics["m"]["median_time_ms"] == 2.0 and metrics["m"]["median_inliers"] == 8.0
-    assert metrics["f"]["failures"] == 1 and metrics["f"]["pairs_within"] == 1
-    assert per_pair["p1"]["f"]["corner_error_px"] is None
-    assert per_pair["p2"]["m"]["corner_error_px"] == pytest.approx(5.0)
+    runs = {"m": {"pairs": {"p1": {"H": np.eye(3), "inliers": 10}, "p2": {"H": off, "inliers": 6},
+                            "p.3": {"H": np.eye(3), "inliers": 15}}, "dropped": []},
+            "f": {"pairs": {"p2": {"H": np.eye(3), "inliers": 7}}, "dropped": [{"item": "p1", "reason": "x"}]}}
+    c = compare_methods(pairs, runs, success_px=3.0)
+    assert c["pairs"] == 3 and c["truth_pairs"] == 2
+    m, f = c["all"]["m"], c["all"]["f"]
+    # errors 0 and 5 px over the two truth pairs: median 2.5, one within 3 px
+    assert m["median_corner_error_px"] == pytest.approx(2.5) and m["pairs_within"] == 1 and m["success_rate"] == 0.5
+    assert m["mean_corner_error_px"] == pytest.approx(0.0) and m["median_inliers"] == 10.0 and m["failures"] == 0
+    # a failure counts as an infinite error: the median of (inf, 0) is inf, so the key is left out (no NaN/inf)
+    assert f["failures"] == 2 and f["pairs_within"] == 1 and "median_corner_error_px" not in f
+    assert "corner_error_px" not in c["per_pair"]["p1"]["f"] and c["per_pair"]["p1"]["f"]["within"] == 0
+    assert c["per_pair"]["p2"]["m"]["corner_error_px"] == pytest.approx(5.0)
+    # the pair without truth has inliers but no accuracy keys
+    assert set(c["per_pair"]["p.3"]["m"]) == {"inliers", "estimated"}
+    metrics = metrics_of(c)["homography"]
+    assert set(metrics["m"]) == {"all", "p1", "p2", "p_3"}  # no dots in the keys (DVC joins with dots)
+    leaves = [v for meth in metrics.values() for item in meth.values() for v in item.values()]
+    assert all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in leaves)
+    plots = quality_plots(c)
+    assert len(plots["inliers"]) == 6 and len(plots["corner_error"]) == 3  # f failed p1; p.3 has no truth
+    no_truth = compare_methods([dict(q, H=None) for q in pairs], runs)
+    assert all(set(s) == {"pairs", "estimated", "failures", "median_inliers"} for s in no_truth["all"].values())
 
 
 def test_synthetic_scene_has_the_requested_outliers():
@@ -132,39 +147,67 @@ def test_bench_rejects_bad_arguments(capsys):
     assert cli.main(["bench", "homography", "--data", "/nonexistent/x", "--no-synthetic"]) == 2
 
 
-def test_estimate_and_report_stages(tmp_path, pair_files):
-    """The two stage scripts end to end on one pair laid out like data/samples/homography."""
-    from cvpipe.homography import correspondences
+def _stage(tmp_path, *args):
+    """Run ``python -m stages.<args>`` from ``tmp_path`` with relative paths, as dvc runs it from the repo root."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run([sys.executable, "-m", *args], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          check=True)
 
+
+def test_stages_end_to_end_with_and_without_truth(tmp_path, pair_files):
+    """features -> match -> estimate -> report on a folder with a NAME_a/NAME_b pair that has truth, a subfolder
+    pair without truth, an unreadable image and a half pair; then the report again with no truth file at all."""
     a, b, (w, h) = pair_files
     images = tmp_path / "images"
-    images.mkdir()
+    (images / "sub").mkdir(parents=True)
     (images / "p_a.png").write_bytes(a.read_bytes())
     (images / "p_b.png").write_bytes(b.read_bytes())
-    truth = tmp_path / "truth.json"
-    io.save_json(truth, {"pairs": [{"name": "p", "a": "p_a.png", "b": "p_b.png", "H": H_AB, "size_a": [w, h]}]})
-    src, dst = correspondences(io.read_image(a, "gray"), io.read_image(b, "gray"))
-    io.save_npz(tmp_path / "matches" / "p.npz", src=src, dst=dst)
+    (images / "sub" / "one.png").write_bytes(a.read_bytes())
+    (images / "sub" / "two.png").write_bytes(b.read_bytes())
+    (images / "broken_a.png").write_bytes(b"not an image")
+    (images / "broken_b.png").write_bytes(b.read_bytes())
+    (images / "alone_a.png").write_bytes(a.read_bytes())
+    io.save_json(images / "truth.json", {"pairs": [{"name": "p", "H": H_AB}]})
     (tmp_path / "params.yaml").write_text((ROOT / "params.yaml").read_text())
-    # run from tmp_path with relative paths, as dvc runs them from the repository root
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    run = [sys.executable, "-m"]
+    _stage(tmp_path, "stages.features", "--images", "images", "--out", "feats", "--section", "homography.features")
+    assert io.load_json(tmp_path / "feats" / "dropped.json")[0]["item"] == "broken_a.png"
+    log = _stage(tmp_path, "stages.homography_match", "--images", "images", "--features", "feats", "--out", "m").stdout
+    assert "dropped 2" in log and "alone_a.png" in log and "not a readable image" in log
+    assert sorted(f.name for f in (tmp_path / "m").glob("*.npz")) == ["p.npz", "sub.npz"]
     for method in ("ours", "opencv_magsac"):
-        subprocess.run(run + ["stages.homography_estimate", "--truth", "truth.json", "--matches", "matches",
-                              "--method", method, "--out", f"est/{method}"], check=True, cwd=tmp_path, env=env)
-    subprocess.run(run + ["stages.homography_report", "--truth", "truth.json", "--images", "images",
-                          "--estimates", "est/ours", "est/opencv_magsac", "--metrics", "metrics.json",
-                          "--out", "report", "--summary", "summary.json"], check=True, cwd=tmp_path, env=env)
-    metrics = io.load_json(tmp_path / "metrics.json")
-    assert set(metrics) == {"ours", "opencv_magsac"}
-    # same 1 px tolerance as the CLI test: an easy synthetic warp
-    assert metrics["ours"]["median_corner_error_px"] < 1.0 and metrics["ours"]["pairs_within"] == 1
-    pic = io.read_image(tmp_path / "report" / "p.png")
-    assert pic.shape[1] == 3 * 400  # truth + two methods
-    from cvpipe.report import validate_summary
+        _stage(tmp_path, "stages.homography_estimate", "--matches", "m", "--method", method, "--out", f"est/{method}")
+    first = (tmp_path / "est/ours/estimates.json").read_bytes()
+    _stage(tmp_path, "stages.homography_estimate", "--matches", "m", "--method", "ours", "--out", "est/ours")
+    assert (tmp_path / "est/ours/estimates.json").read_bytes() == first  # seeded: a rerun is byte-identical
+    assert b"time" not in first and b"seconds" not in first  # times only in the uncached timings
+    assert io.load_json(tmp_path / "outputs/timings/homography_estimate@ours.json")["seconds"]["total"] > 0
 
-    summary = validate_summary(io.load_json(tmp_path / "summary.json"))
-    assert summary["task"] == "homography" and set(summary["timings"]) == {"ours", "opencv_magsac"}
+    def report():
+        _stage(tmp_path, "stages.homography_report", "--images", "images", "--matches", "m", "--estimates",
+               "est/ours", "est/opencv_magsac", "--out", "report", "--metrics", "metrics.json", "--summary",
+               "summary.json", "--plots", "plots")
+        return (io.load_json(tmp_path / "metrics.json")["homography"],
+                validate_summary(io.load_json(tmp_path / "summary.json")))
+
+    metrics, summary = report()
+    assert set(metrics) == {"ours", "opencv_magsac"}
+    for method in metrics:
+        # same 1 px tolerance as the CLI test: an easy synthetic warp
+        assert metrics[method]["p"]["corner_error_px"] < 1.0 and metrics[method]["all"]["pairs_within"] == 1
+        assert "corner_error_px" not in metrics[method]["sub"] and metrics[method]["sub"]["inliers"] >= 4
+    assert io.read_image(tmp_path / "report" / "p.png").shape[1] == 3 * 400  # truth + two methods
+    assert io.read_image(tmp_path / "report" / "sub.png").shape[1] == 2 * 400  # no truth: the methods only
+    not_processed = next(t for t in summary["tables"] if t["title"] == "Not processed")
+    assert {r[0] for r in not_processed["rows"]} == {"alone_a.png", "broken"}
+    assert {r["pair"] for r in io.load_json(tmp_path / "plots" / "corner_error.json")} == {"p"}
+    assert "1 of 2 pairs have a true homography" in summary["description"]
+    assert "Without ground truth (inliers only): sub." in summary["description"]
+
+    (images / "truth.json").unlink()
+    metrics, summary = report()
+    assert all("success_rate" not in m["all"] and "corner_error_px" not in m["p"] for m in metrics.values())
+    assert "no ground truth" in summary["description"] and io.load_json(tmp_path / "plots" / "corner_error.json") == []
+    assert io.read_image(tmp_path / "report" / "p.png").shape[1] == 2 * 400
 
 
 def test_cli_and_bench_argument_checks(pair_files, capsys):

@@ -249,12 +249,11 @@ def test_cell_agreement_counts():
 
 def test_compare_runs_summary():
     lines = [[10.0, 0.0, 50.0]]
-    ours = {"rho": 1.0, "theta": math.pi / 180, "images": [{"file": "a.png", "lines": lines, "seconds": 1.0}]}
-    ref = {"rho": 1.0, "theta": math.pi / 180, "images": [{"file": "a.png", "lines": lines, "seconds": 4.0}]}
-    truth = {"images": [{"file": "a.png", "lines": [[10.0, 0.0], [80.0, 1.0]]}]}
+    ours = {"rho": 1.0, "theta": math.pi / 180, "images": [{"file": "a.png", "lines": lines}]}
+    ref = {"rho": 1.0, "theta": math.pi / 180, "images": [{"file": "a.png", "lines": lines}]}
+    truth = {"a": [[10.0, 0.0], [80.0, 1.0]]}
     m = hough.compare_runs(ours, ref, truth)
-    assert m["parity_min"] == 1.0 and m["identical_images"] == 1
-    assert m["time_ratio_median"] == pytest.approx(0.25)
+    assert m["parity_min"] == 1.0 and m["identical_images"] == 1 and m["truth_images"] == 1
     assert m["recall_ours"] == m["recall_opencv"] == 0.5
     with pytest.raises(InputError, match="not in the opencv run"):
         hough.compare_runs(ours, {**ref, "images": []})
@@ -264,16 +263,28 @@ def test_report_summary_is_valid_for_the_report_page():
     from cvpipe.report import validate_summary
 
     lines = [[10.0, 0.0, 50.0], [20.0, 1.0, 40.0]]
-    run = lambda secs: {"rho": 1.0, "theta": math.pi / 180, "threshold": 30,  # noqa: E731
-                        "images": [{"file": "a.png", "lines": lines, "seconds": secs}]}
-    ours, ref = run(0.002), run(0.004)
-    metrics = hough.compare_runs(ours, ref, {"images": [{"file": "a.png", "lines": [[10.0, 0.0]]}]})
-    summary = hough.report_summary(metrics, ours, ref, [{"path": "outputs/hough/overlays/a.png", "caption": "a"}])
+    ours = {"rho": 1.0, "theta": math.pi / 180, "threshold": 30, "images": [{"file": "a.png", "lines": lines}]}
+    ref = dict(ours)
+    metrics = hough.compare_runs(ours, ref, {"a": [[10.0, 0.0]]})
+    summary = hough.report_summary(metrics, ours, ref, [{"path": "outputs/hough/overlays/a.png", "caption": "a"}],
+                                   [{"item": "b.jpg", "reason": "not a readable image"}])
     validate_summary(summary, "hough summary")
-    assert summary["timings"] == {"ours": 0.002, "opencv": 0.004}
     assert summary["tables"][0]["rows"][0][:4] == ["ours", 2, 1.0, 1.0]
-    plot = hough.time_plot(ours, ref)
-    assert plot == [{"label": "a ours", "ms": 2.0}, {"label": "a opencv", "ms": 4.0}]
+    assert summary["tables"][-1]["rows"] == [["b.jpg", "not a readable image"]]  # nothing dropped silently
+    assert hough.quality_plot(metrics) == [{"image": "a", "method": "ours", "lines": 2, "true_found": 1},
+                                           {"image": "a", "method": "opencv", "lines": 2, "true_found": 1}]
+    flat = hough.metrics_of(metrics)["hough"]
+    assert flat["all"]["recall_ours"] == 1.0 and flat["a"]["identical"] == 1
+
+
+def test_report_summary_without_truth_says_so():
+    lines = [[10.0, 0.0, 50.0]]
+    run = {"rho": 1.0, "theta": math.pi / 180, "threshold": 30, "images": [{"file": "a.png", "lines": lines}]}
+    metrics = hough.compare_runs(run, run, None)
+    assert "recall_ours" not in metrics and metrics["truth_images"] == 0
+    summary = hough.report_summary(metrics, run, run, [], [])
+    assert "no ground truth" in summary["description"]
+    assert summary["tables"][0]["rows"][0][3] == "no ground truth"
 
 
 def test_draw_lines_marks_the_line():

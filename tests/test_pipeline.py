@@ -27,7 +27,25 @@ def test_fresh_clone_repro_runs_every_stage(reproduced):
     assert {"samples", "homography_features", "homography_match", "report"} <= ran(out)
     assert (repo / "data/samples/homography/truth.json").is_file()
     assert (repo / "outputs/report.html").is_file() and (repo / "outputs/plots/timings.json").is_file()
-    assert (repo / "outputs/homography/matches/summary.json").is_file()
+    assert (repo / "outputs/homography/matches/dropped.json").is_file()
+
+
+def test_fresh_clone_run_leaves_git_status_clean(reproduced):
+    """`make run` on a fresh clone must reproduce dvc.lock and the git-tracked metrics byte for byte."""
+    import subprocess
+
+    repo, _ = reproduced
+    status = subprocess.run(["git", "status", "--porcelain", "--untracked-files=all"], cwd=repo, check=True,
+                            capture_output=True, text=True).stdout
+    assert status == "", f"the pipeline changed or left tracked/untracked files:\n{status}"
+
+
+def test_forced_rerun_of_a_stage_leaves_the_stages_after_it_up_to_date(reproduced):
+    repo, _ = reproduced
+    out = dvc(["repro", "-f", "-s", "hough_edges"], repo).stdout
+    assert ran(out) == {"hough_edges"}
+    status = dvc(["status"], repo).stdout
+    assert "hough_lines" not in status and "hough_report" not in status, status
 
 
 def test_dvc_plots_show_writes_its_page(reproduced, tmp_path):
@@ -67,3 +85,43 @@ def test_matching_param_change_reruns_matching_only(reproduced):
         assert re.search(r"homography\.match\.ratio\s+0\.8\s+0\.7", diff), diff
     finally:
         params.write_text(text)
+
+
+# ---- own images: every task on a user-style folder without truth, through `dvc exp run -S <task>.data=...` ----
+
+TASKS = ["hough", "homography", "defect", "logo", "stereo", "panorama"]
+
+
+@pytest.mark.parametrize("task", TASKS)
+def test_own_images_without_truth_through_dvc_exp_run(reproduced, task):
+    import json
+    import subprocess
+
+    import own_data
+
+    repo, _ = reproduced
+    dest = f"data/mine/{task}"
+    names = own_data.build(task, repo / "data/samples", repo / dest)
+    assert not list((repo / dest).rglob("truth.json"))
+    try:
+        dvc(["exp", "run", "-n", f"mine-{task}", "-S", f"{task}.data={dest}"], repo)
+        summary = json.loads((repo / f"outputs/{task}/summary.json").read_text())
+        text = json.dumps(summary)
+        for name in names:  # every item of the user's folder is reported (results table or pictures)
+            assert name in text, f"{name} missing from the {task} summary"
+        assert summary["pictures"], f"{task}: no pictures for the user's images"
+        for pic in summary["pictures"]:
+            assert (repo / pic["path"]).is_file(), pic
+        assert "no ground truth" in text.lower(), f"{task}: the summary should say there is no ground truth"
+        page = (repo / "outputs/report.html").read_text(encoding="utf-8")
+        assert f'id="task-{task}"' in page and names[0] in page
+        shown = json.loads(dvc(["exp", "show", "--json"], repo).stdout)
+        exps = [e for rev in shown for e in (rev.get("experiments") or [])
+                if any((r.get("name") == f"mine-{task}") for r in (e.get("revs") or []))]
+        assert exps, f"experiment mine-{task} not in `dvc exp show --json`"
+        data = exps[0]["revs"][0]["data"]
+        metrics_text = json.dumps(data.get("metrics", {}))
+        assert f'"{task}"' in metrics_text and names[0] in metrics_text, f"{task}: the experiment has no metrics"
+    finally:
+        subprocess.run(["git", "checkout", "--", "params.yaml", "dvc.lock"], cwd=repo, check=False)
+        subprocess.run(["git", "checkout", "--", "outputs"], cwd=repo, check=False)

@@ -1,0 +1,46 @@
+"""Stage `panorama_opencv_stitcher`: the cv2.Stitcher baseline on the same sets of `panorama.data` and at the same
+resolutions (`<out>/<set>.png`, `<set>.json`; its failures and the images it leaves out are recorded)."""
+
+from pathlib import Path
+
+from cvpipe import datasets, io, panorama
+from cvpipe.errors import InputError
+from stages._runner import Stage, run
+
+
+def panorama_opencv_stitcher(st: Stage) -> None:
+    out = Path(st.args.out)
+    work = st.sections["panorama.features"].work_megapix
+    conf = st.sections["panorama.match"].min_confidence
+    compose = st.sections["panorama.warp"].compose_megapix
+    sets, _ = datasets.find_panorama(st.args.images)  # what the layout drops, panorama_features reports
+    made = 0
+    for s in st.progress(sets, "cv2.Stitcher"):
+        files, images = [], []
+        for f in s.files:
+            try:
+                images.append(io.read_image(f, "color"))
+                files.append(f.name)
+            except InputError as exc:
+                st.drop(f"{s.name}/{f.name}", str(exc))
+        with st.timer("stitch"):
+            status, pano, used = panorama.opencv_stitch(images, work, compose, conf) if len(images) >= 2 else \
+                ("ERR_NEED_MORE_IMGS", None, [])
+        result = {"ok": status == "OK", "status": status, "used": used, "files": files}
+        if pano is not None:
+            io.save_image(out / f"{s.name}.png", pano)
+            result.update(size=[pano.shape[1], pano.shape[0]], empty_share=float((pano == 0).all(axis=2).mean()))
+            made += 1
+            for k, name in enumerate(files):
+                if k not in used:
+                    st.drop(f"{s.name}/{name}", "left out by cv2.Stitcher, which gives no reason")
+        else:
+            st.drop(s.name, f"cv2.Stitcher failed: {status}")
+        io.save_json(out / f"{s.name}.json", result)
+    out.mkdir(parents=True, exist_ok=True)
+    st.made(f"cv2.Stitcher stitched {made} of {len(sets)} sets into {out}")
+
+
+if __name__ == "__main__":
+    run(panorama_opencv_stitcher, section=["panorama.features", "panorama.match", "panorama.warp"],
+        args={"images": "the panorama.data folder", "out": "folder for <set>.png and <set>.json"})

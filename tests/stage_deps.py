@@ -1,0 +1,90 @@
+"""The cvpipe/stages modules each DVC stage imports, directly or not (static: every import statement counts,
+also those inside functions). Run ``python tests/stage_deps.py`` to print what each stage of dvc.yaml lacks."""
+
+from __future__ import annotations
+
+import ast
+import re
+import sys
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("cvpipe", "stages")
+
+
+def module_file(name: str) -> Path | None:
+    """The file of a module of this repository (``cvpipe.io`` -> cvpipe/io.py), or None for third-party ones."""
+    if name.split(".")[0] not in PACKAGES:
+        return None
+    base = ROOT.joinpath(*name.split("."))
+    for cand in (base.with_suffix(".py"), base / "__init__.py"):
+        if cand.is_file():
+            return cand
+    return None
+
+
+def _imports(path: Path) -> set[str]:
+    pkg = ".".join(path.relative_to(ROOT).with_suffix("").parts[:-1])
+    if path.name == "__init__.py":
+        pkg = ".".join(path.relative_to(ROOT).parts[:-1])
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = pkg.split(".")
+                parts = parts[: len(parts) - node.level + 1]
+                base = ".".join(parts + ([node.module] if node.module else []))
+            found.add(base)
+            found.update(f"{base}.{a.name}" for a in node.names)
+    return found
+
+
+def closure(module: str) -> set[Path]:
+    """Every repository file that importing ``module`` may load (with the parent packages' ``__init__``)."""
+    todo, seen = [module], set()
+    while todo:
+        name = todo.pop()
+        parts = name.split(".")
+        for i in range(1, len(parts) + 1):
+            f = module_file(".".join(parts[:i]))
+            if f is not None and f not in seen:
+                seen.add(f)
+                todo.extend(_imports(f))
+    return seen
+
+
+def stage_modules(dvc_yaml: Path = ROOT / "dvc.yaml") -> dict[str, str]:
+    """Stage name -> the ``stages.<x>`` module its cmd runs."""
+    stages = yaml.safe_load(dvc_yaml.read_text(encoding="utf-8"))["stages"]
+    out = {}
+    for name, st in stages.items():
+        m = re.search(r"python -m (stages\.\w+)", st["cmd"])
+        if m:
+            out[name] = m.group(1)
+    return out
+
+
+def missing_deps(dvc_yaml: Path = ROOT / "dvc.yaml") -> dict[str, list[str]]:
+    """Stage name -> repository files it imports that its ``deps`` do not cover (a listed folder covers its files)."""
+    stages = yaml.safe_load(dvc_yaml.read_text(encoding="utf-8"))["stages"]
+    result = {}
+    for name, module in stage_modules(dvc_yaml).items():
+        deps = [str(d).rstrip("/") for d in stages[name].get("deps", [])]
+        need = sorted(f.relative_to(ROOT).as_posix() for f in closure(module))
+        lacking = [f for f in need if not any(f == d or f.startswith(d + "/") for d in deps)]
+        if lacking:
+            result[name] = lacking
+    return result
+
+
+if __name__ == "__main__":
+    for stage, files in missing_deps().items():
+        print(f"{stage}:")
+        for f in files:
+            print(f"      - {f}")
+    sys.exit(0)
