@@ -349,6 +349,72 @@ def make_stereo() -> SampleSet:
     return out
 
 
+#: Middlebury calibration of scikit-image's (quarter-size, 741x500) motorcycle pair, from its docstring: focal
+#: length, left principal point, doffs (principal column of the right minus the left), baseline in mm
+MOTORCYCLE_CALIB = {"focal": 994.978, "cx": 311.193, "cy": 254.877, "doffs": 31.086, "baseline": 193.001}
+
+
+def make_stereo_unrectified(rng: np.random.Generator, name: str = "motorcycle_unrectified",
+                            max_rotation_deg: float = 2.0, max_shift: float = 6.0,
+                            max_scale: float = 0.015) -> tuple[SampleSet, dict[str, str]]:
+    """An unrectified pair with its calibration: the motorcycle pair with the right view turned and shifted.
+
+    The right camera is rotated about its x (pitch) and z (roll) axes through its principal point (uniform in
+    +-``max_rotation_deg``), its image scaled about the principal point (1 +- ``max_scale``) and shifted
+    vertically (+-``max_shift`` px). There is no rotation about the vertical axis, so that the right principal
+    column, and with it the calibration's ``doffs``, still hold after rectification: the Middlebury ``calib.txt``
+    of the original rig then gives metric depth.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        Draws the transform.
+    name : str
+        Folder of the pair inside the stereo sample folder.
+
+    Returns
+    -------
+    SampleSet
+        ``images``: ``<name>/left.png`` (the original left view), ``<name>/right.png`` (the transformed right
+        view); ``arrays``: ``<name>/truth.npz`` with ``disparity`` (float32, the ORIGINAL pair's true disparity of
+        the left image, NaN = unknown) and ``H_unrectify`` (3x3, original right pixels -> ``right.png`` pixels);
+        ``truth``: ``{name: {"max_disp", "H_unrectify", "rotation_deg", "scale", "shift_y_px", "calib"}}``.
+    texts : dict
+        ``{"<name>/calib.txt": Middlebury calib.txt text}`` of the original rig at the sample's size.
+    """
+    import skimage.data
+
+    left, right, disp = skimage.data.stereo_motorcycle()
+    disp = np.where(np.isfinite(disp), disp, np.nan).astype(np.float32)
+    h, w = left.shape[:2]
+    c = MOTORCYCLE_CALIB
+    f, cx1, cy = c["focal"], c["cx"] + c["doffs"], c["cy"]
+    K = np.array([[f, 0.0, cx1], [0.0, f, cy], [0.0, 0.0, 1.0]])
+    ax, az = np.radians(rng.uniform(-max_rotation_deg, max_rotation_deg, 2))
+    s = 1.0 + rng.uniform(-max_scale, max_scale)
+    ty = rng.uniform(-max_shift, max_shift)
+    Rx = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(ax), -np.sin(ax)], [0.0, np.sin(ax), np.cos(ax)]])
+    Rz = np.array([[np.cos(az), -np.sin(az), 0.0], [np.sin(az), np.cos(az), 0.0], [0.0, 0.0, 1.0]])
+    scale = np.array([[s, 0.0, (1 - s) * cx1], [0.0, s, (1 - s) * cy], [0.0, 0.0, 1.0]])
+    H = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, ty], [0.0, 0.0, 1.0]]) @ scale @ K @ Rz @ Rx @ np.linalg.inv(K)
+    H /= H[2, 2]
+    right_bgr = np.ascontiguousarray(right[..., ::-1])
+    out = SampleSet()
+    out.images[f"{name}/left.png"] = np.ascontiguousarray(left[..., ::-1])
+    out.images[f"{name}/right.png"] = cv2.warpPerspective(right_bgr, H, (w, h), flags=cv2.INTER_CUBIC,
+                                                          borderMode=cv2.BORDER_CONSTANT)
+    out.arrays[f"{name}/truth.npz"] = {"disparity": disp, "H_unrectify": H}
+    max_disp = int(np.ceil((np.nanmax(disp) + 1) / 16) * 16)
+    out.truth = {name: {"max_disp": max_disp, "H_unrectify": H.tolist(), "rotation_deg": [float(np.degrees(ax)), 0.0,
+                                                                                          float(np.degrees(az))],
+                        "scale": float(s), "shift_y_px": float(ty), "calib": "calib.txt",
+                        "source": "Middlebury 2014 motorcycle via scikit-image, right view transformed"}}
+    calib = (f"cam0=[{f:g} 0 {c['cx']:g}; 0 {f:g} {cy:g}; 0 0 1]\n"
+             f"cam1=[{f:g} 0 {cx1:g}; 0 {f:g} {cy:g}; 0 0 1]\n"
+             f"doffs={c['doffs']:g}\nbaseline={c['baseline']:g}\nwidth={w}\nheight={h}\nndisp={max_disp}\n")
+    return out, {f"{name}/calib.txt": calib}
+
+
 def make_panorama(rng: np.random.Generator) -> SampleSet:
     """Sets of overlapping perspective views cut from real photos, with the true homographies to the first view."""
     out = SampleSet()

@@ -331,7 +331,8 @@ def test_inspect_command_reports_failures_and_keeps_the_other_results(reference,
     assert len(err) == 1 and err[0].startswith("cvpipe: error:") and "blank.png: registration failed" in err[0]
     records = json.loads(captured.out)
     assert [r["verdict"] for r in records] == ["faulty", None]
-    assert set(records[0]) == {"probe", "verdict", "score", "regions", "H"} and len(records[0]["regions"]) == 1
+    assert set(records[0]) == {"probe", "verdict", "score", "regions", "H", "overlay"} and len(records[0]["regions"]) == 1
+    assert records[0]["overlay"] == str(out / "faulty_regions.png")  # the JSON names the picture written
     assert "registration failed" in records[1]["error"]
     assert (out / "faulty_regions.png").is_file() and (out / "faulty_diff.png").is_file()
     assert json.loads((out / "inspect.json").read_text()) == records
@@ -347,7 +348,8 @@ def test_inspect_command_all_failing_and_unreadable_reference(tmp_path, capsys, 
     io.save_image(tmp_path / "ref.png", reference)
     io.save_image(tmp_path / "blank.png", np.zeros((SIZE, SIZE), np.uint8))
     assert cli.main(["inspect", str(tmp_path / "ref.png"), str(tmp_path / "blank.png")]) == 1
-    assert "no probe could be registered" in capsys.readouterr().err
+    # the one probe's own failure is the one line, naming the probe
+    assert "blank.png: registration failed: the probe is blank" in capsys.readouterr().err
     assert cli.main(["inspect", str(tmp_path / "missing.png"), str(tmp_path / "blank.png")]) == 2
     assert "missing.png" in capsys.readouterr().err
 

@@ -405,7 +405,7 @@ def line_photo(tmp_path):
 @pytest.mark.parametrize("impl", ["ours", "opencv"])
 def test_cli_json_matches_the_library(line_photo, capsys, impl):
     path, img = line_photo
-    assert cli.main(["hough", str(path), "--impl", impl, "--threshold", "60", "--json"]) == 0
+    assert cli.main(["hough", str(path), "--method", impl, "--threshold", "60", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     edges = cv2.Canny(img, 50, 150)
     np.testing.assert_array_equal(np.array(out["lines"]).reshape(-1, 3),
@@ -424,7 +424,7 @@ def test_cli_text_output_and_refine(line_photo, capsys):
     (["--threshold", "0"], "`threshold` must be >= 1"),
     (["--rho", "-1"], "`rho` must be > 0"),
     (["--theta-deg", "0"], "`--theta-deg` must be > 0"),
-    (["--impl", "opencv", "--refine"], "`--refine` is only available with --impl ours"),
+    (["--method", "opencv", "--refine"], "`--refine` is only available with --method ours"),
     (["--canny", "200", "100"], "need 0 <= `low` <= `high`"),
 ])
 def test_cli_bad_arguments_exit_2(line_photo, capsys, argv, message):

@@ -234,11 +234,11 @@ def test_stitch_cli_json(tmp_path, views, capsys):
     out = tmp_path / "pano.png"
     assert cli.main(["stitch", *paths, str(bad), "-o", str(out), "--json"]) == 0
     res = json.loads(capsys.readouterr().out)
-    assert res["used"] == [0, 1, 2] and res["dropped"][0]["image"] == 3
+    assert res["used"] == paths and res["dropped"][0]["image"] == str(bad)
     assert "unreadable" in res["dropped"][0]["reason"]
     pano = cv2.imread(str(out))
     assert [pano.shape[1], pano.shape[0]] == res["size"]
-    # the reported homography of the reference view (input position 2) maps its centre into the panorama where
+    # the reported homography of the reference view (input position 2, "v1.png") maps its centre into the panorama where
     # the panorama shows that same pixel
     H = np.array(res["homographies"][2])
     x, y = warping.apply_h(H, np.array([[160.0, 120.0]]))[0]

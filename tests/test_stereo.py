@@ -272,8 +272,8 @@ def test_cli_errors(tmp_path, capsys):
     assert "must both be grayscale or both BGR" in capsys.readouterr().err
     assert cli.main(["stereo", str(gp), str(gp), "--max-disp", "60", "-o", str(tmp_path / "d.npy")]) == 2
     assert "`max_disp` must be in [1, 59]" in capsys.readouterr().err
-    assert cli.main(["stereo", str(gp), str(gp), "--max-disp", "16", "-o", str(tmp_path / "d.png")]) == 2
-    assert "`--out` must end in .npy" in capsys.readouterr().err
+    assert cli.main(["stereo", str(gp), str(gp), "--max-disp", "16", "-o", str(tmp_path / "d.txt")]) == 2
+    assert "`-o` must end in one of .npy, .png" in capsys.readouterr().err
     assert not (tmp_path / "d.npy").exists()
 
 

@@ -11,6 +11,8 @@ OpenCV SGBM is run in each of its four modes with block sizes 3, 5 and 7 (same r
 the lowest bad-2.0 on that pair is the baseline ("best of SGBM's modes"). Time: median over ``--repeats`` calls,
 the methods interleaved in this process after a warm-up call, so that load from other processes hits them alike.
 The one-off numba compile time is measured separately in a fresh interpreter with an empty cache.
+
+With ``--rectify`` the benchmark is the rectification one instead (``cvpipe.bench.stereo_rectify``).
 """
 
 from __future__ import annotations
@@ -65,6 +67,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="data root holding middlebury_stereo/ (default: $CVPIPE_DATA)")
     parser.add_argument("--repeats", type=int, default=5, help="timed calls per pair and method (median)")
     parser.add_argument("--no-compile", action="store_true", help="skip the fresh-cache compile measurement")
+    parser.add_argument("--rectify", action="store_true",
+                        help="instead: unrectify each pair by a seeded random rotation/shift/scale of the right "
+                             "view and compare our uncalibrated rectification with OpenCV's "
+                             "(cvpipe.bench.stereo_rectify)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the unrectifying transforms (--rectify)")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
 
 
@@ -123,6 +130,10 @@ def _best_sgbm(left, right, max_disp, truth) -> tuple[dict, np.ndarray]:
 def run(args: argparse.Namespace) -> int:
     if not args.data:
         raise InputError("no data root: pass --data DIR or set CVPIPE_DATA")
+    if args.rectify:
+        from .stereo_rectify import run_rectify
+
+        return run_rectify(args, load_pairs(Path(args.data)))
     if args.repeats < 1:
         raise InputError(f"`--repeats` must be >= 1, got {args.repeats}")
     pairs = load_pairs(Path(args.data))

@@ -1,5 +1,152 @@
-"""One module per `cvpipe` subcommand.
+"""One module per `cvpipe` subcommand, plus the output helpers they share (progress bars, step timings, notes).
 
-Each module defines ``HELP`` (one line), ``EXAMPLE`` (one command line), ``add_arguments(parser)`` and
-``run(args) -> int``. ``cvpipe.cli`` lists them in ``COMMANDS``; a module that is absent is simply not offered.
+Each module defines ``HELP`` (one line), ``EXAMPLE`` (one command line that runs on the bundled samples),
+``add_arguments(parser)`` and ``run(args) -> int``. ``cvpipe.cli`` lists them in ``COMMANDS``; a module that is
+absent is simply not offered. ``HELP`` and ``EXAMPLE`` are plain string literals (``cvpipe --help`` reads them from
+the source), and module level imports stay light: OpenCV, numba and the algorithm modules are imported inside
+``run()``, so that ``cvpipe <cmd> --help`` answers at once.
 """
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import sys
+import time
+from typing import Iterable, Iterator, TypeVar
+
+T = TypeVar("T")
+
+log = logging.getLogger("cvpipe")
+
+#: set by :func:`configure_output` from ``-q``: no progress bars, no notes
+_quiet = False
+
+
+def configure_output(verbose: int = 0, quiet: bool = False) -> None:
+    """Route ``cvpipe`` logging to stderr: warnings by default, steps with ``-v``, debug with ``-vv``, only errors
+    with ``-q`` (which also hides progress bars and notes)."""
+    global _quiet
+    _quiet = bool(quiet)
+    level = logging.ERROR if quiet else (logging.WARNING, logging.INFO, logging.DEBUG)[min(int(verbose), 2)]
+    log.setLevel(level)
+    if not any(isinstance(h, _StderrHandler) for h in log.handlers):
+        handler = _StderrHandler()
+        handler.setFormatter(logging.Formatter("cvpipe: %(message)s"))
+        log.addHandler(handler)
+        log.propagate = False
+
+
+class _StderrHandler(logging.StreamHandler):
+    """A handler writing to the current ``sys.stderr`` (which tests and embedding programs may replace)."""
+
+    def __init__(self):
+        super().__init__(sys.stderr)
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value):
+        pass
+
+
+def progress(items: Iterable[T], desc: str, total: int | None = None) -> Iterable[T]:
+    """``items`` with a tqdm bar on stderr; none when stderr is not a terminal, with ``-q`` or for a single item."""
+    if total is None and hasattr(items, "__len__"):
+        total = len(items)  # type: ignore[arg-type]
+    if _quiet or (total is not None and total < 2):
+        return items
+    from tqdm import tqdm
+
+    return tqdm(items, desc=desc, total=total, disable=None, dynamic_ncols=True, leave=False)
+
+
+@contextlib.contextmanager
+def step(name: str) -> Iterator[None]:
+    """Log ``name`` and its wall time at INFO level (shown with ``-v``)."""
+    t0 = time.perf_counter()
+    yield
+    log.info("%s: %.3f s", name, time.perf_counter() - t0)
+
+
+def note(message: str) -> None:
+    """A one-line note on stderr (silenced by ``-q``)."""
+    if not _quiet:
+        print(f"cvpipe: {message}", file=sys.stderr, flush=True)
+
+
+def kernels_cached(*dispatchers) -> bool:
+    """True when every numba dispatcher given has a valid entry in its on-disk cache (``cache=True``).
+
+    Reads numba's cache index the way numba does (a stale index, e.g. after an upgrade or an edit, counts as
+    missing). Anything unexpected in numba's internals counts as cached, so the worst case is a missing note.
+    """
+    for d in dispatchers:
+        try:
+            cache_file = d._cache._cache_file
+            if not os.path.exists(cache_file._index_path) or not cache_file._load_index():
+                return False
+        except Exception:  # noqa: BLE001 - numba internals; never let the note break a command
+            continue
+    return True
+
+
+def numba_kernels(module) -> list:
+    """The numba dispatchers defined in ``module`` that are compiled on their own (``inline="always"`` ones are
+    compiled into their callers and never cached by themselves)."""
+    return [v for v in vars(module).values()
+            if hasattr(v, "_cache") and hasattr(v, "py_func") and getattr(v, "__module__", None) == module.__name__
+            and getattr(v, "targetoptions", {}).get("inline") != "always"]
+
+
+#: one-off numba compile time of each kernel module, seconds: the cold-cache minus the warm-cache CPU time of the
+#: command that runs them (a subprocess with an empty NUMBA_CACHE_DIR; compilation is single-threaded, so this is
+#: its wall time on an idle machine). Measured 2026-12-01 on the 2-core developer machine: hough 3.3, homography
+#: 25.1 (homography), 25.2 (logo), 22.7 (inspect), stereo 39.0, panorama 23.1 (homography + blending)
+COMPILE_SECONDS = {"cvpipe.hough": 3, "cvpipe.homography": 25, "cvpipe.stereo": 40, "cvpipe.blending": 2}
+
+
+def compile_note(task: str, *modules) -> None:
+    """Say once, on stderr, that numba kernels of ``task`` are compiling because their on-disk cache is cold.
+
+    ``modules`` are kernel modules, or ``(module, dispatchers)`` pairs when a command runs only some of a module's
+    kernels. The time announced is the sum of :data:`COMPILE_SECONDS` over the modules with a cold kernel.
+    """
+    seconds = 0.0
+    for item in modules:
+        module, dispatchers = item if isinstance(item, tuple) else (item, numba_kernels(item))
+        if not kernels_cached(*dispatchers):
+            seconds += COMPILE_SECONDS.get(module.__name__, 5)
+    if seconds:
+        note(f"compiling the {task} kernels once, about {seconds:.0f} s (cached for the next runs)")
+
+
+def overlay_paths(inputs: list[str], overlay: str | None, suffix: str) -> list[str | None]:
+    """Where each input's picture goes: ``overlay`` itself for one input (unless it ends in a slash), else
+    ``overlay/<input stem><suffix>.png`` (numbered when two inputs share a stem); None each without ``--overlay``."""
+    from pathlib import Path
+
+    if not overlay:
+        return [None] * len(inputs)
+    if len(inputs) == 1 and not overlay.endswith(("/", os.sep)):
+        return [overlay]
+    stems = [Path(s).stem for s in inputs]
+    # inputs with one stem from different folders must not overwrite each other's picture
+    names = [f"{k:03d}_{st}" if stems.count(st) > 1 else st for k, st in enumerate(stems)]
+    return [str(Path(overlay) / f"{n}{suffix}.png") for n in names]
+
+
+def with_flags(message: str, names: Iterable[str]) -> str:
+    """``message`` with each parameter name in ``names`` (``min_inliers``) spelt as its flag (``--min-inliers``).
+
+    Algorithm modules name parameters as ``params.yaml`` does; on the command line the hint must name the flag.
+    """
+    import re
+
+    for name in names:
+        flag = "--" + name.replace("_", "-")
+        message = re.sub(rf"`?(?<![\w-]){re.escape(name)}(?![\w-])`?", flag, message)
+    return message

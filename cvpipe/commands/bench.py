@@ -20,9 +20,10 @@ BENCHMARKS = {
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from ..cli import _load, add_subcommands
+    from ..cli import add_subcommands
 
-    add_subcommands(parser, _load("cvpipe.bench", BENCHMARKS), "benchmark")
+    # lazily: `cvpipe bench --help` reads each benchmark's HELP from its source, only the one run is imported
+    add_subcommands(parser, "cvpipe.bench", BENCHMARKS, "benchmark")
 
 
 def run(args: argparse.Namespace) -> int:  # pragma: no cover - dispatch happens through the sub-subparser

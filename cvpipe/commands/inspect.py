@@ -7,25 +7,31 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-from tqdm import tqdm
+from types import SimpleNamespace
+from typing import TYPE_CHECKING
 
-from .. import defects, io
-from ..errors import CvpipeError, EstimationError, InputError
-from ..features import DETECTORS, detect
+from ..params import DefectDiffParams, DefectFeaturesParams, DefectRegionParams, DefectRegisterParams
+from . import compile_note, overlay_paths, progress, with_flags
+
+if TYPE_CHECKING:
+    from .. import defects
 
 HELP = "judge probe images faulty or perfect against a golden reference and outline the defects"
 EXAMPLE = "cvpipe inspect data/samples/defect/reference.png data/samples/defect/probes/*.png --out out/ --json"
 
-_DEFAULTS = defects.InspectParams()
+#: the defaults of defects.InspectParams (the same dataclasses), without importing the algorithm module
+_DEFAULTS = SimpleNamespace(features=DefectFeaturesParams(), diff=DefectDiffParams(), regions=DefectRegionParams(),
+                            register=DefectRegisterParams())
+#: ``--detector`` choices: the keys of ``cvpipe.features.DETECTORS`` (a test keeps them equal)
+DETECTORS = ("akaze", "brisk", "orb", "sift")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("reference", help="golden reference image")
     parser.add_argument("probes", nargs="+", metavar="PROBE", help="probe images of the same part")
-    parser.add_argument("--out", help="folder for overlays (<probe>_regions.png, <probe>_diff.png; <folder>_<probe> when two probes share a "
-                        "file name)")
-    parser.add_argument("--detector", choices=sorted(DETECTORS), default=_DEFAULTS.features.detector,
+    parser.add_argument("--out", help="folder for overlays (<probe>_regions.png, <probe>_diff.png; <folder>_<probe> "
+                        "when two probes share a file name)")
+    parser.add_argument("--detector", type=str.lower, choices=DETECTORS, default=_DEFAULTS.features.detector,
                         help=f"keypoints for the coarse registration (default {_DEFAULTS.features.detector})")
     parser.add_argument("--threshold", type=float, default=_DEFAULTS.regions.threshold,
                         help="difference threshold as a fraction of the reference contrast "
@@ -36,15 +42,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"smallest defect kept, px (default {_DEFAULTS.regions.min_area})")
     parser.add_argument("--pad", type=float, default=_DEFAULTS.regions.pad,
                         help=f"pad the probe boxes by this many px (default {_DEFAULTS.regions.pad:g})")
+    parser.add_argument("--overlay", metavar="PNG",
+                        help="write the probe with its defect boxes; with several probes PNG is a folder "
+                             "(<probe>_regions.png)")
+    parser.add_argument("--ecc-levels", type=int, default=_DEFAULTS.register.ecc_levels,
+                        help=f"pyramid levels of the ECC refinement (default {_DEFAULTS.register.ecc_levels})")
     parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
 
 
 def params_from_args(args: argparse.Namespace) -> defects.InspectParams:
     """The inspection parameters: the dataclass defaults with the command-line overrides (validated there)."""
-    p = _DEFAULTS
+    from .. import defects
+
+    p = defects.InspectParams()
     try:
         return replace(p, features=replace(p.features, detector=args.detector),
                        diff=replace(p.diff, tolerance_radius=args.tolerance),
+                       register=replace(p.register, ecc_levels=args.ecc_levels),
                        regions=replace(p.regions, threshold=args.threshold, min_area=args.min_area, pad=args.pad,
                                        seed_threshold=max(p.regions.seed_threshold, args.threshold)))
     except ValueError as exc:
@@ -53,6 +67,8 @@ def params_from_args(args: argparse.Namespace) -> defects.InspectParams:
 
 def result_dict(probe: str, r: defects.Inspection) -> dict:
     """The JSON record of one inspected probe (the interface contract of DESIGN.md)."""
+    import numpy as np
+
     return {"probe": probe, "verdict": r.verdict, "score": round(r.score, 3),
             "regions": np.round(r.probe_regions, 2).tolist(), "H": r.registration.H.tolist()}
 
@@ -81,9 +97,14 @@ def overlay_stems(probes: list[str]) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from .. import defects, homography, io
+    from ..errors import CvpipeError, EstimationError, InputError
+    from ..features import detect
+
     params = params_from_args(args)
     if args.out:
         io.check_output_folder(args.out, "`--out`")
+    compile_note("inspect", homography)
     reference = io.read_image(args.reference, "color")
     ref_gray = io.to_gray(reference)
     if int(ref_gray.max()) == int(ref_gray.min()):
@@ -91,8 +112,9 @@ def run(args: argparse.Namespace) -> int:
                          "nothing to register probes to", file=args.reference)
     ref_feats = detect(ref_gray, params.features.detector, params.features.max_features)
     stems = overlay_stems(args.probes)
+    pictures = overlay_paths(args.probes, args.overlay, "_regions")
     results, errors = [], []
-    for path, stem in zip(tqdm(args.probes, desc="inspect", disable=None), stems):
+    for path, stem, picture in progress(list(zip(args.probes, stems, pictures)), "inspect"):
         try:
             probe = io.read_image(path, "color")
             r = defects.inspect(ref_gray, io.to_gray(probe), params, reference_features=ref_feats)
@@ -100,20 +122,26 @@ def run(args: argparse.Namespace) -> int:
             if exc.file is None:
                 exc.file = str(path)
             errors.append(exc)
-            msg = str(exc) if str(path) in str(exc) else f"{path}: {exc}"
+            msg = with_flags(str(exc), ["ecc_levels"])  # the hint names this command's flag
+            msg = msg if str(path) in msg else f"{path}: {msg}"
             results.append({"probe": path, "verdict": None, "score": None, "regions": [], "H": None, "error": msg})
             continue
         results.append(result_dict(path, r))
         if args.out:
             io.save_image(Path(args.out) / f"{stem}_regions.png", defects.draw_regions(probe, r.probe_regions))
             io.save_image(Path(args.out) / f"{stem}_diff.png", defects.heat_map(r.difference.diff, r.threshold))
+            results[-1]["overlay"] = str(Path(args.out) / f"{stem}_regions.png")
+        if picture:
+            io.save_image(picture, defects.draw_regions(probe, r.probe_regions))
+            results[-1]["overlay"] = picture
     code = max((e.exit_code for e in errors), default=0)
     if len(errors) == len(results):
         # nothing to report: the failure itself is the one line (and the one JSON record)
-        first = results[0]["error"]
-        more = f" ({len(errors)} probes failed; first: {first})" if len(errors) > 1 else f": {first}"
+        if len(errors) == 1:
+            raise type(errors[0])(results[0]["error"], file=errors[0].file)
         raise (InputError if code == 2 else EstimationError)(
-            f"no probe could be registered to {args.reference}{more}", file=errors[0].file)
+            f"none of the {len(errors)} probes could be inspected against {args.reference}; first: "
+            f"{results[0]['error']}", file=errors[0].file)
     for res in results:
         if "error" in res:
             print(f"cvpipe: error: {res['error']}", file=sys.stderr)

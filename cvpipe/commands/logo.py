@@ -6,14 +6,20 @@ import argparse
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from .. import io, logos
-from ..errors import CvpipeError, InputError
-from ..features import DETECTORS, detect
 from ..params import LogoFeaturesParams, LogoMatchParams, LogoVerifyParams
+from . import compile_note, overlay_paths, progress, step
+
+if TYPE_CHECKING:
+    from .. import logos
 
 HELP = "recognise gallery logos in scene photos (brand or none, and the logo outline)"
-EXAMPLE = "cvpipe logo data/samples/logo/scenes/scene_00.jpg --gallery data/samples/logo/gallery --json"
+EXAMPLE = ("cvpipe logo data/samples/logo/scenes/scene_00.jpg --gallery data/samples/logo/gallery "
+           "--overlay logo.png --json")
+
+#: ``--method`` choices: the keys of ``cvpipe.features.DETECTORS`` (a test keeps them equal)
+DETECTORS = ("akaze", "brisk", "orb", "sift")
 
 
 def gallery_files(folder: str | Path) -> list[tuple[str, Path]]:
@@ -24,6 +30,9 @@ def gallery_files(folder: str | Path) -> list[tuple[str, Path]]:
     InputError
         The folder does not exist or holds no image in either layout.
     """
+    from .. import io
+    from ..errors import InputError
+
     root = Path(folder)
     if not root.is_dir():
         raise InputError(f"{root}: gallery folder does not exist")
@@ -38,19 +47,59 @@ def gallery_files(folder: str | Path) -> list[tuple[str, Path]]:
 
 def load_gallery(folder: str | Path, detector: str, max_features: int, params: LogoMatchParams) -> logos.Gallery:
     """Read, detect and index a gallery folder (see :func:`gallery_files`)."""
+    from .. import io, logos
+    from ..features import detect
+
     refs = []
-    for brand, f in gallery_files(folder):
+    for brand, f in progress(gallery_files(folder), "gallery"):
         gray = io.read_image(f, "gray")
         refs.append(logos.Reference(brand, str(f), detect(gray, detector, max_features),
                                     (gray.shape[1], gray.shape[0])))
     return logos.build_gallery(refs, params.min_features, params.reference_features, params.register_references)
 
 
-def detection_json(scene: str, det: logos.Detection) -> dict:
+#: two found outlines overlapping by more than this intersection-over-union are one logo (the better one is kept)
+MAX_OVERLAP = 0.3
+
+
+def quad_iou(a, b) -> float:
+    """Intersection over union of two convex quadrilaterals ((4, 2) corner arrays, scene pixels)."""
+    import cv2
+    import numpy as np
+
+    pa, pb = np.asarray(a, np.float32).reshape(4, 2), np.asarray(b, np.float32).reshape(4, 2)
+    area_a, area_b = abs(cv2.contourArea(pa)), abs(cv2.contourArea(pb))
+    inter, _ = cv2.intersectConvexConvex(pa, pb)
+    union = area_a + area_b - inter
+    return float(inter / union) if union > 0 else 0.0
+
+
+def every_logo(det: logos.Detection, score_threshold: float, max_overlap: float = MAX_OVERLAP) -> list:
+    """Every plausible hypothesis of a scene that reaches ``score_threshold``, best first, after non-maximum
+    suppression: a hypothesis whose outline overlaps a better one by more than ``max_overlap`` IoU is dropped.
+
+    The first entry, when there is one, is the scene's ``brand`` (the same ordering as ``logos.decide``).
+    """
+    good = sorted((h for h in det.hypotheses if h.plausible and h.quad is not None and h.score >= score_threshold),
+                  key=lambda h: (h.score, h.inliers), reverse=True)
+    kept: list = []
+    for h in good:
+        if all(quad_iou(h.quad, k.quad) <= max_overlap for k in kept):
+            kept.append(h)
+    return kept
+
+
+def _logo_json(h) -> dict:
+    return {"brand": h.brand, "score": round(float(h.score), 3), "inliers": int(h.inliers),
+            "quad": [[round(float(x), 2), round(float(y), 2)] for x, y in h.quad]}
+
+
+def detection_json(scene: str, det: logos.Detection, found: list | None = None) -> dict:
     """The interface-contract record of one scene (``score`` is null when no hypothesis survived)."""
     return {"scene": scene, "brand": det.brand, "inliers": int(det.inliers),
             "score": round(float(det.score), 3) if math.isfinite(det.score) else None,
-            "quad": None if det.quad is None else [[round(float(x), 2), round(float(y), 2)] for x, y in det.quad]}
+            "quad": None if det.quad is None else [[round(float(x), 2), round(float(y), 2)] for x, y in det.quad],
+            "logos": [_logo_json(h) for h in (found or [])]}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -58,7 +107,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scenes", nargs="+", metavar="SCENE", help="scene photos")
     parser.add_argument("--gallery", required=True, metavar="DIR",
                         help="reference logos: DIR/<brand>.<ext> or DIR/<brand>/*.<ext>")
-    parser.add_argument("--method", default=fp.detector, choices=list(DETECTORS),
+    parser.add_argument("--method", type=str.lower, default=fp.detector, choices=DETECTORS,
                         help=f"keypoint detector (default {fp.detector})")
     parser.add_argument("--max-features", type=int, default=fp.max_features,
                         help=f"keypoints per image (default {fp.max_features})")
@@ -69,10 +118,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threshold", type=float, default=vp.score_threshold,
                         help=f"score (-log10 NFA) needed to name a brand (default {vp.score_threshold})")
     parser.add_argument("--seed", type=int, default=0, help="RANSAC seed (default 0)")
-    parser.add_argument("--json", action="store_true", help="print a JSON list, one record per scene")
+    parser.add_argument("--overlay", metavar="PNG",
+                        help="write the scene with each found logo outlined and named; with several scenes, PNG "
+                             "is a folder and each scene gets <scene>_logo.png")
+    parser.add_argument("--json", action="store_true",
+                        help='print a JSON list, one record per scene ({"scene", "brand", "inliers", "score", '
+                             '"quad", "logos": [every brand found, best first], "overlay"})')
 
 
 def run(args: argparse.Namespace) -> int:
+    from .. import io, logos
+    from ..errors import CvpipeError, InputError
+    from ..features import detect
+    from ..overlays import draw_quads
+
     if args.max_features < 1:
         raise InputError(f"`--max-features` must be a positive integer, got {args.max_features}")
     try:
@@ -82,20 +141,30 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(str(exc).replace("`ratio`", "`--ratio`")) from exc
     if args.min_long_side < 0:
         raise InputError(f"`--min-long-side` must be a non-negative number of pixels, got {args.min_long_side}")
-    gallery = load_gallery(args.gallery, args.method, args.max_features, mp)
+    from .. import homography
+
+    compile_note("logo", homography)
+    with step(f"gallery ({args.method})"):
+        gallery = load_gallery(args.gallery, args.method, args.max_features, mp)
     records, failed = [], 0
-    for scene in args.scenes:
+    for scene, picture in progress(list(zip(args.scenes, overlay_paths(args.scenes, args.overlay, "_logo"))), "logo"):
         try:
-            gray = io.read_image(scene, "gray")
-            det = logos.recognize(gallery, detect(gray, args.method, args.max_features,
-                                                  min_long_side=args.min_long_side),
-                                  (gray.shape[1], gray.shape[0]), mp, vp, args.seed)
-            records.append(detection_json(scene, det))
+            with step(scene):
+                gray = io.read_image(scene, "gray")  # as before: a JPEG decoded to gray is not cvtColor's gray
+                det = logos.recognize(gallery, detect(gray, args.method, args.max_features,
+                                                      min_long_side=args.min_long_side),
+                                      (gray.shape[1], gray.shape[0]), mp, vp, args.seed)
+            found = every_logo(det, vp.score_threshold)
+            records.append(detection_json(scene, det, found))
+            if picture:
+                io.save_image(picture, draw_quads(io.read_image(scene, "color"), [h.quad for h in found],
+                                                  [f"{h.brand} ({h.score:.0f})" for h in found]))
+                records[-1]["overlay"] = picture
         except CvpipeError as exc:
             # one bad scene must not cost the answers for the others
             failed += 1
             print(f"cvpipe: error: {exc}", file=sys.stderr)
-            records.append({"scene": scene, "brand": None, "inliers": 0, "score": None, "quad": None,
+            records.append({"scene": scene, "brand": None, "inliers": 0, "score": None, "quad": None, "logos": [],
                             "error": str(exc)})
     if args.json:
         print(io.dumps_json(records))

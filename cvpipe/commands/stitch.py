@@ -3,21 +3,24 @@
 from __future__ import annotations
 
 import argparse
-import warnings
 from dataclasses import replace
+from pathlib import Path
 
-import numpy as np
-
-from .. import io
-from ..errors import BudgetWarning, InputError, memory_budget
 from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
                       PanoramaWarpParams)
-from ..warping import PROJECTIONS
+from . import compile_note, progress, step, with_flags
 
 HELP = "stitch overlapping photos (any order) into one seamless, cropped panorama"
 EXAMPLE = "cvpipe stitch data/samples/panorama/coffee/*.jpg -o pano.png --projection plane --json"
 
 _F, _M, _W, _B = PanoramaFeaturesParams(), PanoramaMatchParams(), PanoramaWarpParams(), PanoramaBlendParams()
+_H = PanoramaHomographiesParams()
+#: choices: ``cvpipe.warping.PROJECTIONS`` and ``cvpipe.features.DETECTORS`` keys (a test keeps them equal)
+PROJECTIONS = ("plane", "cylindrical", "spherical")
+DETECTORS = ("akaze", "brisk", "orb", "sift")
+REFINE = ("auto", "homography", "rotation", "none")
+#: parameters that the panorama's hints name, spelt as flags in this command's messages
+_HINTED = ("min_inliers", "min_confidence", "max_features", "work_megapix", "refine")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,14 +30,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"panorama surface (default {_W.projection})")
     parser.add_argument("--blender", choices=("multiband", "feather"), default=_B.blender,
                         help=f"blending (default {_B.blender})")
-    parser.add_argument("--detector", default=_F.detector, help=f"feature detector (default {_F.detector})")
+    parser.add_argument("--detector", type=str.lower, choices=DETECTORS, default=_F.detector,
+                        help=f"feature detector (default {_F.detector})")
+    parser.add_argument("--max-features", type=int, default=_F.max_features,
+                        help=f"keypoints per image (default {_F.max_features})")
+    parser.add_argument("--ratio", type=float, default=_M.ratio, help=f"Lowe's ratio test (default {_M.ratio})")
+    parser.add_argument("--min-inliers", type=int, default=_M.min_inliers,
+                        help=f"RANSAC inliers a pair of photos needs (default {_M.min_inliers})")
+    parser.add_argument("--min-confidence", type=float, default=_M.min_confidence,
+                        help=f"pair confidence inliers / (8 + 0.3 matches) needed (default {_M.min_confidence:g})")
+    parser.add_argument("--refine", choices=REFINE, default=_H.refine,
+                        help=f"global refinement of the homographies (default {_H.refine})")
     parser.add_argument("--work-megapix", type=float, default=_F.work_megapix,
                         help=f"registration resolution in megapixels, <= 0 for full (default {_F.work_megapix})")
     parser.add_argument("--compose-megapix", type=float, default=_W.compose_megapix,
                         help=f"output resolution in megapixels per image, <= 0 for full (default {_W.compose_megapix})")
     parser.add_argument("--no-crop", action="store_true", help="keep the empty borders (default: crop them)")
+    parser.add_argument("--overlay", metavar="PNG",
+                        help="write the panorama with each used photo's outline and name (--projection plane)")
     parser.add_argument("--seed", type=int, default=_M.seed, help=f"RANSAC seed (default {_M.seed})")
-    parser.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
+    parser.add_argument("--json", action="store_true",
+                        help='print {"out", "used": [paths], "dropped": [{"image": path, "reason"}], "homographies", '
+                             '"size", ...} on stdout')
 
 
 #: peak bytes per composed input pixel (warped image, masks, seams and multiband pyramids, canvas share);
@@ -44,6 +61,10 @@ COMPOSE_BYTES_PER_PIXEL = 50
 
 def _compose_within_budget(images: list, compose_megapix: float) -> float:
     """``compose_megapix``, lowered (with a note) when composing at it would exceed the memory budget."""
+    import warnings
+
+    from ..errors import BudgetWarning, memory_budget
+
     cap = memory_budget() / (COMPOSE_BYTES_PER_PIXEL * len(images)) / 1e6
     largest = max(img.shape[0] * img.shape[1] for img in images) / 1e6
     wanted = largest if compose_megapix <= 0 else min(compose_megapix, largest)
@@ -56,53 +77,86 @@ def _compose_within_budget(images: list, compose_megapix: float) -> float:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from .. import blending, homography, io
+    from ..errors import EstimationError, InputError
     from ..panorama import stitch
 
     # before any work: a panorama that cannot be written must not cost the stitching first
     io.check_output_path(args.out, "`-o`", io.IMAGE_WRITE_SUFFIXES)
     images, positions, dropped = [], [], []
-    for k, path in enumerate(args.images):
+    for k, path in enumerate(progress(args.images, "read")):
         try:
             images.append(io.read_image(path, "color"))
             positions.append(k)
         except InputError as exc:
             dropped.append({"image": k, "reason": f"unreadable: {exc}"})
+    if args.overlay and args.projection != "plane":
+        raise InputError(f"`--overlay` draws the photos' outlines through plane homographies; it needs "
+                         f"--projection plane, got {args.projection}")
     if len(images) < 2:
         why = "; ".join(d["reason"] for d in dropped)
         raise InputError(f"a panorama needs at least two readable images, got {len(images)}" + (f" ({why})" if why
                                                                                                else ""))
-    compose_megapix = _compose_within_budget(images, args.compose_megapix)
-    pano = stitch(
-        images,
-        features=replace(_F, detector=args.detector, work_megapix=args.work_megapix),
-        matching=replace(_M, seed=args.seed),
-        homographies=PanoramaHomographiesParams(),
-        warp=replace(_W, projection=args.projection, compose_megapix=compose_megapix),
-        blend=replace(_B, blender=args.blender),
-        crop=not args.no_crop,
-        rng=args.seed,
-        ids=positions,
-    )
+    try:
+        params = dict(
+            features=replace(_F, detector=args.detector, work_megapix=args.work_megapix,
+                             max_features=args.max_features),
+            matching=replace(_M, seed=args.seed, ratio=args.ratio, min_inliers=args.min_inliers,
+                             min_confidence=args.min_confidence),
+            homographies=replace(_H, refine=args.refine),
+            warp=replace(_W, projection=args.projection,
+                         compose_megapix=_compose_within_budget(images, args.compose_megapix)),
+            blend=replace(_B, blender=args.blender))
+    except ValueError as exc:
+        raise InputError(with_flags(str(exc), _HINTED + ("ratio", "compose_megapix"))) from exc
+    compile_note("panorama", blending, homography)
+    try:
+        with step(f"stitch {len(images)} images"):
+            pano = stitch(images, **params, crop=not args.no_crop, rng=args.seed,
+                           ids=[args.images[k] for k in positions])  # messages name the files
+    except EstimationError as exc:
+        raise EstimationError(with_flags(str(exc), _HINTED)) from exc
     io.save_image(args.out, pano.image)
     reg = pano.registration
     for k, why in reg.dropped:
-        dropped.append({"image": positions[k], "reason": why})
+        dropped.append({"image": positions[k], "reason": with_flags(why, _HINTED)})
     dropped.sort(key=lambda d: d["image"])
+    for d in dropped:  # inputs are named by their paths, as given
+        d["image"] = args.images[d["image"]]
     plane = args.projection == "plane"
     homs = [(pano.to_panorama @ pano.homographies[a]) if plane else pano.homographies[a] for a in reg.used]
     homs = [H / H[2, 2] for H in homs]
+    if args.overlay:
+        from ..overlays import draw_quads
+
+        shapes = [images[a].shape for a in reg.used]
+        quads = [_outline(H, sh[1], sh[0]) for H, sh in zip(homs, shapes)]
+        io.save_image(args.overlay, draw_quads(pano.image, quads, [Path(args.images[positions[a]]).name
+                                                                   for a in reg.used]))
     result = {
-        "used": [positions[a] for a in reg.used],
+        "out": args.out,
+        **({"overlay": args.overlay} if args.overlay else {}),
+        "used": [args.images[positions[a]] for a in reg.used],
         "dropped": dropped,
         "homographies": [np.round(H, 10) for H in homs],
         "homographies_frame": "panorama" if plane else "reference",
-        "reference": positions[reg.reference],
+        "reference": args.images[positions[reg.reference]],
         "size": [int(pano.image.shape[1]), int(pano.image.shape[0])],
         "model": reg.model,
     }
     if args.json:
         print(io.dumps_json(result))
     else:
-        print(f"{args.out}: {result['size'][0]}x{result['size'][1]} from images {result['used']}"
-              + "".join(f"\n  dropped image {d['image']}: {d['reason']}" for d in dropped))
+        print(f"{args.out}: {result['size'][0]}x{result['size'][1]} from {len(result['used'])} images: "
+              + ", ".join(result["used"]) + "".join(f"\n  dropped {d['image']}: {d['reason']}" for d in dropped))
     return 0
+
+
+def _outline(H, width: int, height: int):
+    """The outline of a ``width`` x ``height`` photo (corner pixel centres) mapped by ``H``, (4, 2)."""
+    import numpy as np
+
+    c = np.array([[0, 0, 1], [width - 1, 0, 1], [width - 1, height - 1, 1], [0, height - 1, 1]], float) @ H.T
+    return c[:, :2] / c[:, 2:]

@@ -1,0 +1,726 @@
+"""Stereo rectification: uncalibrated (from the fundamental matrix) and calibrated (from a calibration file).
+
+Uncalibrated: Hartley's method (Hartley 1999, "Theory and practice of projective rectification"), with the
+shearing correction of Loop & Zhang (1999) on the right image. Hartley's method was chosen over the quasi-Euclidean
+one because it is closed form and purely projective: the quasi-Euclidean model (Fusiello & Irsara) assumes both
+views share one focal length and differ by a rotation, so a scale change or a shift of the principal point between
+the photos (zoom, cropping, phone stabilisation) leaves vertical errors it cannot remove, and it needs a non-linear
+solve. The steps:
+
+1. the left homography ``H_left = T^-1 G R T``: translate the image centre to the origin (T), rotate the epipole
+   onto the x axis (R, the smaller of the two rotations that do so, so the image is never turned upside down), and
+   send it to infinity with ``G = [[1, 0, 0], [0, 1, 0], [-1/f, 0, 1]]``, which is the identity to first order at
+   the centre: the projective transform closest to a rigid one there. A pair that is nearly rectified already
+   (epipole near infinity on the x axis) gets a near-identity;
+2. the right homography's second and third rows follow from ``F`` and ``H_left`` (the epipolar line of a right
+   point must be the row ``y`` in the rectified left image): ``y_r = -(N_2 . x) / (N_1 . x)`` with
+   ``N = H_left^-T F^T``;
+3. its first row is free: it is chosen to keep the right image as undistorted as possible, by Loop & Zhang's
+   shearing transform (the mid-lines of the image stay perpendicular and keep their length ratio, i.e. no skew
+   and no aspect change), then translated so that the right principal point (by default the image centre) keeps
+   its column;
+4. a horizontal shift of the right image puts the smallest disparity of the inlier matches (robustly: isolated
+   strays dropped, then their 0.5th percentile, see :func:`robust_disparity_range`) at ``margin`` pixels, so that a
+   search over ``0 .. max_disp - 1`` covers the scene, and ``max_disp`` is the smallest multiple of 16 above their
+   robust largest disparity plus a margin.
+
+Calibrated: ``cv2.stereoRectify`` and ``cv2.initUndistortRectifyMap`` from the intrinsics, lens distortion and
+relative pose of a Middlebury ``calib.txt`` or an OpenCV stereo YAML file, with the same disparity shift. The
+parsers take the file's text (this module never touches the disk) and the file name for the messages.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from .epipolar import FundamentalFit, epipoles, find_fundamental
+from .errors import EstimationError, InputError
+
+#: robust extremes of the inlier disparities (percentiles): a few false matches along an epipolar line are inliers
+#: of F with any disparity, so the plain min / max would follow them
+DISPARITY_PERCENTILES = (0.5, 99.5)
+#: ``max_disp`` headroom above the largest (robust) inlier disparity: a fraction of it, at least 4 px
+_MAX_DISP_HEADROOM = (0.1, 4.0)
+
+
+@dataclass(frozen=True, eq=False)
+class DepthGeometry:
+    """What turns a disparity of the rectified left image into depth and 3-D points.
+
+    Attributes
+    ----------
+    focal : float
+        Focal length of the rectified left image, pixels.
+    cx, cy : float
+        Its principal point, pixels.
+    baseline : float
+        Distance between the camera centres, in ``unit``.
+    doffs : float
+        Added to the disparity: ``Z = focal * baseline / (d + doffs)`` (the difference of the principal points'
+        columns, right minus left, in the rectified frame).
+    unit : str
+        Unit of ``baseline`` and therefore of depth (e.g. ``"mm"``).
+    exact : bool
+        False when the rectification was estimated from the images (uncalibrated) and only the intrinsics and
+        baseline come from the calibration: then ``doffs`` assumes the right view kept its principal column.
+    """
+
+    focal: float
+    cx: float
+    cy: float
+    baseline: float
+    doffs: float
+    unit: str
+    exact: bool = True
+
+
+@dataclass(frozen=True, eq=False)
+class Rectification:
+    """The result of :func:`rectify_uncalibrated` or :func:`rectify_calibrated`.
+
+    Attributes
+    ----------
+    H_left, H_right : (3, 3) float64
+        Original -> rectified pixels of each image (without lens distortion in the calibrated case).
+    size : (int, int)
+        (width, height) of the rectified images (the input size).
+    shift : float
+        Horizontal shift applied to the right image, pixels (already inside ``H_right``).
+    max_disp : int
+        Disparities to search (0 .. max_disp - 1), a multiple of 16 covering the inlier matches.
+    disparity_range : (float, float)
+        Robust smallest and largest disparity of the inlier matches after rectification, pixels.
+    vertical_error : (N,) float64
+        ``|y_left - y_right|`` of the inlier matches after rectification, pixels (calibrated: of the matches that
+        land within 2 px of the same row, empty without matches).
+    fit : FundamentalFit or None
+        The epipolar geometry (uncalibrated only).
+    depth : DepthGeometry or None
+        Present when a calibration was given.
+    maps : tuple or None
+        Calibrated only: ``(left_x, left_y, right_x, right_y)`` float32 remap tables (rectified -> original).
+    """
+
+    H_left: np.ndarray
+    H_right: np.ndarray
+    size: tuple
+    shift: float
+    max_disp: int
+    disparity_range: tuple
+    vertical_error: np.ndarray
+    fit: FundamentalFit | None = None
+    depth: DepthGeometry | None = None
+    maps: tuple | None = field(default=None, repr=False)
+
+    @property
+    def vertical_error_median(self) -> float:
+        """Median vertical error of the inlier matches, pixels."""
+        return float(np.median(self.vertical_error)) if len(self.vertical_error) else float("nan")
+
+    @property
+    def vertical_error_p95(self) -> float:
+        """95th percentile of the vertical error of the inlier matches, pixels."""
+        return float(np.percentile(self.vertical_error, 95)) if len(self.vertical_error) else float("nan")
+
+
+# ------------------------------------------------------------------------------------------- small helpers
+
+
+def apply_h(H: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """(N, 2) points mapped by the homography ``H`` (homogeneous column vectors)."""
+    p = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
+    q = p @ H[:, :2].T + H[:, 2]
+    return q[:, :2] / q[:, 2:3]
+
+
+def _check_size(size) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in size)
+    except (TypeError, ValueError):
+        raise InputError(f"`size` must be (width, height), got {size!r}") from None
+    if w < 2 or h < 2:
+        raise InputError(f"`size` must be at least (2, 2), got {size!r}")
+    return w, h
+
+
+def distortion(H, size) -> dict[str, float]:
+    """Distortion of an image by a rectifying homography, from its mid-lines (Loop & Zhang's measures).
+
+    Parameters
+    ----------
+    H : (3, 3) array_like
+        Original -> rectified pixels.
+    size : (int, int)
+        (width, height) of the original image.
+
+    Returns
+    -------
+    dict
+        ``aspect_change``: |(length ratio of the mapped horizontal and vertical mid-lines) / (w / h) - 1|;
+        ``skew_deg``: |90 - the angle between them| in degrees. Both 0 for a similarity.
+    """
+    w, h = _check_size(size)
+    H = np.asarray(H, dtype=np.float64)
+    a, b, c, d = apply_h(H, np.array([[(w - 1) / 2, 0], [w - 1, (h - 1) / 2], [(w - 1) / 2, h - 1],
+                                      [0, (h - 1) / 2]]))
+    x, y = b - d, c - a
+    cosang = abs(float(x @ y)) / (np.linalg.norm(x) * np.linalg.norm(y))
+    return {"aspect_change": abs(float(np.linalg.norm(x) / np.linalg.norm(y)) / ((w - 1) / (h - 1)) - 1.0),
+            "skew_deg": 90.0 - math.degrees(math.acos(min(1.0, cosang)))}
+
+
+def _shear(Hp: np.ndarray, w: int, h: int) -> np.ndarray:
+    """Loop & Zhang's shearing transform S = [[sa, sb, 0], [0, 1, 0], [0, 0, 1]] that makes the mapped mid-lines
+    of a (w, h) image perpendicular with length ratio (w - 1) / (h - 1)."""
+    a, b, c, d = apply_h(Hp, np.array([[(w - 1) / 2, 0], [w - 1, (h - 1) / 2], [(w - 1) / 2, h - 1],
+                                       [0, (h - 1) / 2]]))
+    (xu, xv), (yu, yv) = b - d, c - a
+    W, Hh = float(w - 1), float(h - 1)
+    den = Hh * W * (xv * yu - xu * yv)
+    if abs(den) < 1e-12:
+        raise EstimationError("the right rectifying homography collapses the image onto a line; the epipolar "
+                              "geometry is implausible (check the matches)")
+    sa = (Hh ** 2 * xv ** 2 + W ** 2 * yv ** 2) / den
+    sb = (Hh ** 2 * xu * xv + W ** 2 * yu * yv) / -den
+    if sa < 0:
+        sa, sb = -sa, -sb
+    return np.array([[sa, sb, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _max_disp(hi: float) -> int:
+    top = hi + max(_MAX_DISP_HEADROOM[0] * hi, _MAX_DISP_HEADROOM[1])
+    return int(max(16, math.ceil(top / 16.0) * 16))
+
+
+def robust_disparity_range(d) -> tuple[float, float]:
+    """Smallest and largest disparity of inlier matches, ignoring stray ones.
+
+    A false match along an epipolar line is an inlier of F with any disparity (e.g. two SIFT keypoints at one
+    place matched to a repeated texture 400 px away). Isolated extremes, separated from the rest by a gap of more
+    than ``max(8 px, 25 % of the remaining range)``, are dropped from each end (at most 2 % of the points per end),
+    then the nearest-rank percentiles of :data:`DISPARITY_PERCENTILES` are taken.
+    """
+    d = np.sort(np.asarray(d, dtype=np.float64).ravel())
+    if len(d) == 0:
+        raise EstimationError("no inlier matches to measure the disparity range")
+    budget = max(1, int(0.02 * len(d)))
+    lo_i, hi_i = 0, len(d) - 1
+    for _ in range(budget):
+        span = d[hi_i - 1] - d[lo_i] if hi_i - 1 > lo_i else 0.0
+        if hi_i > lo_i and d[hi_i] - d[hi_i - 1] > max(8.0, 0.25 * span):
+            hi_i -= 1
+    for _ in range(budget):
+        span = d[hi_i] - d[lo_i + 1] if lo_i + 1 < hi_i else 0.0
+        if lo_i < hi_i and d[lo_i + 1] - d[lo_i] > max(8.0, 0.25 * span):
+            lo_i += 1
+    kept = d[lo_i:hi_i + 1]
+    lo = np.percentile(kept, DISPARITY_PERCENTILES[0], method="higher")
+    hi = np.percentile(kept, DISPARITY_PERCENTILES[1], method="lower")
+    return float(lo), float(hi)
+
+
+def _disparity_shift(xl: np.ndarray, xr: np.ndarray, margin: float) -> tuple[float, float, float]:
+    """(shift to add to the right x, robust low, robust high disparity after the shift)."""
+    lo, hi = robust_disparity_range(xl - xr)
+    shift = float(lo - margin)
+    return shift, float(lo - shift), float(hi - shift)
+
+
+# -------------------------------------------------------------------------------------------- uncalibrated
+
+
+def rectifying_homographies(F, pts1, pts2, size, margin: float = 1.0, right_anchor=None) -> tuple:
+    """Hartley / Loop-Zhang rectifying homographies of a pair with fundamental matrix ``F``.
+
+    Parameters
+    ----------
+    F : (3, 3) array_like
+        Rank-2 fundamental matrix, ``x_right^T F x_left = 0``.
+    pts1, pts2 : (N, 2) array_like
+        Inlier matches (left, right) that set the disparity shift; N >= 1.
+    size : (int, int)
+        (width, height) of both images.
+    margin : float
+        Where the smallest (robust) inlier disparity lands, pixels (>= 0).
+    right_anchor : (float, float), optional
+        The right image point whose column is kept before the disparity shift (default: the image centre; the
+        right principal point when a calibration is known, so that its ``doffs`` still holds).
+
+    Returns
+    -------
+    H_left, H_right : (3, 3) float64
+        Original -> rectified pixels.
+    shift : float
+        Horizontal shift included in ``H_right``, pixels.
+    lo, hi : float
+        Robust smallest and largest inlier disparity after rectification.
+    """
+    w, h = _check_size(size)
+    if not (math.isfinite(margin) and margin >= 0):
+        raise InputError(f"`margin` must be a finite number >= 0 pixels, got {margin!r}")
+    F = np.asarray(F, dtype=np.float64)
+    p1 = np.asarray(pts1, dtype=np.float64).reshape(-1, 2)
+    p2 = np.asarray(pts2, dtype=np.float64).reshape(-1, 2)
+    if len(p1) == 0 or len(p1) != len(p2):
+        raise InputError("`pts1` and `pts2` must hold the same number (>= 1) of inlier matches")
+    cx, cy = (w - 1) / 2.0, (h - 1) / 2.0
+    T = np.array([[1.0, 0.0, -cx], [0.0, 1.0, -cy], [0.0, 0.0, 1.0]])
+    e1, _ = epipoles(F)
+    e = T @ e1
+    if e[2] < 0:
+        e = -e
+    ang = math.atan2(e[1], e[0])
+    # the smaller rotation that puts the epipole on the x axis (either direction): never turn the image over
+    if ang > math.pi / 2:
+        ang -= math.pi
+    elif ang <= -math.pi / 2:
+        ang += math.pi
+    c, s = math.cos(ang), math.sin(ang)
+    R = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    er = R @ e
+    if abs(er[0]) < 1e-12:
+        raise EstimationError("the epipole is at the image centre (the camera moved forward): such a pair "
+                              "cannot be rectified by homographies; take the photos side by side")
+    G = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-er[2] / er[0], 0.0, 1.0]])
+    H_left = np.linalg.inv(T) @ G @ R @ T
+    corners = np.array([[0.0, 0.0, 1.0], [w - 1, 0.0, 1.0], [0.0, h - 1, 1.0], [w - 1, h - 1, 1.0]])
+    if ((corners @ H_left[2]) <= 0).any():
+        raise EstimationError("the rectified left image would wrap through infinity (the epipole lies inside the "
+                              "image, the camera moved forward): take the photos side by side")
+    # rows 2 and 3 of the right homography are fixed by F and H_left
+    N = np.linalg.inv(H_left).T @ F.T
+    r2, r3 = -N[2], N[1]
+    if np.mean(np.column_stack([p2, np.ones(len(p2))]) @ r3) < 0:
+        r2, r3 = -r2, -r3
+    # provisional first row: keep the columns of the right image (least squares over a grid), then shear
+    gx, gy = np.meshgrid(np.linspace(0, w - 1, 9), np.linspace(0, h - 1, 9))
+    g = np.column_stack([gx.ravel(), gy.ravel(), np.ones(gx.size)])
+    wgt = g @ r3
+    if (wgt <= 0).any():
+        raise EstimationError("the rectified right image would wrap through infinity (the epipole lies inside "
+                              "the image): such a pair cannot be rectified by homographies")
+    r1, *_ = np.linalg.lstsq(g / wgt[:, None], g[:, 0], rcond=None)
+    Hp = np.vstack([r1, r2, r3])
+    H_right = _shear(Hp, w, h) @ Hp
+    ax, ay = (cx, cy) if right_anchor is None else (float(right_anchor[0]), float(right_anchor[1]))
+    x_anchor = apply_h(H_right, np.array([[ax, ay]]))[0, 0]
+    H_right = np.array([[1.0, 0.0, ax - x_anchor], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]) @ H_right
+    xl = apply_h(H_left, p1)[:, 0]
+    xr = apply_h(H_right, p2)[:, 0]
+    shift, lo, hi = _disparity_shift(xl, xr, margin)
+    H_right = np.array([[1.0, 0.0, shift], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]) @ H_right
+    return H_left / H_left[2, 2], H_right / H_right[2, 2], shift, lo, hi
+
+
+def rectify_uncalibrated(pts1, pts2, size, threshold: float = 1.0, margin: float = 1.0, calibration=None,
+                         rng=None, fit: FundamentalFit | None = None) -> Rectification:
+    """Rectify a pair from its point matches alone (the fundamental matrix), optionally with known intrinsics.
+
+    Parameters
+    ----------
+    pts1, pts2 : (N, 2) array_like
+        Putative matches, left and right pixels.
+    size : (int, int)
+        (width, height) of both images.
+    threshold : float
+        Sampson-distance inlier threshold of :func:`cvpipe.epipolar.find_fundamental`, pixels.
+    margin : float
+        Where the smallest (robust) inlier disparity lands, pixels.
+    calibration : Calibration, optional
+        A calibration of the rig without usable extrinsics (a Middlebury ``calib.txt`` describes the rectified
+        rig): its focal length, baseline and ``doffs`` give the depth geometry (``exact=False``).
+    rng : None, int or numpy.random.Generator
+        Seed of the RANSAC sampling.
+    fit : FundamentalFit, optional
+        An epipolar geometry already estimated from these matches (skips the RANSAC).
+
+    Returns
+    -------
+    Rectification
+
+    Raises
+    ------
+    EstimationError
+        Too few matches, a planar scene or a pure rotation (see ``find_fundamental``), or a geometry that
+        homographies cannot rectify (epipole inside the image).
+    """
+    w, h = _check_size(size)
+    if fit is None:
+        fit = find_fundamental(pts1, pts2, threshold=threshold, rng=rng)
+    p1 = np.asarray(pts1, dtype=np.float64).reshape(-1, 2)[fit.inliers]
+    p2 = np.asarray(pts2, dtype=np.float64).reshape(-1, 2)[fit.inliers]
+    anchor = None if calibration is None else (calibration.K2[0, 2], calibration.K2[1, 2])
+    H_left, H_right, shift, lo, hi = rectifying_homographies(fit.F, p1, p2, (w, h), margin, anchor)
+    vert = np.abs(apply_h(H_left, p1)[:, 1] - apply_h(H_right, p2)[:, 1])
+    depth = None
+    if calibration is not None:
+        K1 = calibration.K1
+        J = _jacobian(H_left, K1[0, 2], K1[1, 2])
+        c0 = apply_h(H_left, np.array([[K1[0, 2], K1[1, 2]]]))[0]
+        depth = DepthGeometry(focal=float(K1[0, 0] * math.sqrt(abs(np.linalg.det(J)))), cx=float(c0[0]),
+                              cy=float(c0[1]), baseline=calibration.baseline,
+                              doffs=float(calibration.doffs + shift), unit=calibration.unit, exact=False)
+    return Rectification(H_left=H_left, H_right=H_right, size=(w, h), shift=shift, max_disp=_max_disp(hi),
+                         disparity_range=(lo, hi), vertical_error=vert, fit=fit, depth=depth)
+
+
+def _jacobian(H: np.ndarray, x: float, y: float) -> np.ndarray:
+    q = H @ np.array([x, y, 1.0])
+    return (H[:2, :2] - np.outer(q[:2] / q[2], H[2, :2])) / q[2]
+
+
+def opencv_uncalibrated(pts1, pts2, size, threshold: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                                          np.ndarray]:
+    """OpenCV's uncalibrated rectification on the same matches: ``cv2.findFundamentalMat`` (USAC_MAGSAC) and
+    ``cv2.stereoRectifyUncalibrated``.
+
+    Returns
+    -------
+    H_left, H_right : (3, 3) float64
+        Original -> rectified pixels.
+    F : (3, 3) float64
+    inliers : (N,) bool
+    """
+    w, h = _check_size(size)
+    p1 = np.asarray(pts1, dtype=np.float64).reshape(-1, 2)
+    p2 = np.asarray(pts2, dtype=np.float64).reshape(-1, 2)
+    F, mask = cv2.findFundamentalMat(p1, p2, cv2.USAC_MAGSAC, float(threshold), 0.999, 10000)
+    if F is None or F.shape != (3, 3) or mask is None:
+        raise EstimationError("cv2.findFundamentalMat (USAC_MAGSAC) found no fundamental matrix")
+    inl = mask.ravel().astype(bool)
+    ok, H1, H2 = cv2.stereoRectifyUncalibrated(p1[inl], p2[inl], F, (w, h), threshold=5.0)
+    if not ok:
+        raise EstimationError("cv2.stereoRectifyUncalibrated failed")
+    return np.asarray(H1, float), np.asarray(H2, float), np.asarray(F, float), inl
+
+
+# ----------------------------------------------------------------------------------------------- calibrated
+
+
+@dataclass(frozen=True, eq=False)
+class Calibration:
+    """A stereo calibration: intrinsics, lens distortion and the pose of the right camera in the left's frame.
+
+    Attributes
+    ----------
+    K1, K2 : (3, 3) float64
+        Camera matrices (pixels) of the left and right camera.
+    D1, D2 : (k,) float64
+        OpenCV distortion coefficients (zeros for Middlebury).
+    R : (3, 3) float64
+        Rotation from the left to the right camera frame (``X_right = R X_left + T``).
+    T : (3,) float64
+        Translation, in ``unit`` (Middlebury: ``(-baseline, 0, 0)``).
+    size : (int, int) or None
+        (width, height) the calibration is for.
+    doffs : float
+        Middlebury's ``doffs`` (principal column of the right minus that of the left), pixels; 0 otherwise.
+    ndisp : int or None
+        Middlebury's bound on the disparities.
+    unit : str
+        Unit of ``T`` (``"mm"`` for Middlebury; ``"units of T"`` for OpenCV files, which do not say).
+    rectified : bool
+        True when the file describes an already rectified rig (Middlebury): no extrinsics to rectify with.
+    source : str
+        The file name, for messages.
+    """
+
+    K1: np.ndarray
+    D1: np.ndarray
+    K2: np.ndarray
+    D2: np.ndarray
+    R: np.ndarray
+    T: np.ndarray
+    size: tuple | None
+    doffs: float = 0.0
+    ndisp: int | None = None
+    unit: str = "units of T"
+    rectified: bool = False
+    source: str = "<calibration>"
+
+    @property
+    def baseline(self) -> float:
+        """Distance between the camera centres, in ``unit``."""
+        return float(np.linalg.norm(self.T))
+
+    def check_size(self, size) -> None:
+        """Raise InputError naming the key when the images are not the size the calibration is for."""
+        w, h = _check_size(size)
+        if self.size is None:
+            return
+        cw, ch = self.size
+        if (cw, ch) != (w, h):
+            key = "width" if cw != w else "height"
+            if not self.rectified:
+                key = "image_size (or K1/K2)"
+            raise InputError(f"{self.source}: `{key}` says {cw}x{ch} but the images are {w}x{h}")
+
+
+_MB_MATRIX = re.compile(r"^\[(.*)\]$")
+
+
+def parse_middlebury_calib(text: str, source: str = "calib.txt") -> Calibration:
+    """Parse a Middlebury ``calib.txt`` (``cam0``, ``cam1``, ``doffs``, ``baseline``, ``width``, ``height``,
+    ``ndisp``; other keys are ignored).
+
+    Parameters
+    ----------
+    text : str
+        The file's content: ``key=value`` lines, matrices as ``[a b c; d e f; g h i]``.
+    source : str
+        The file name, for messages.
+
+    Returns
+    -------
+    Calibration
+        ``rectified=True``, ``R = I``, ``T = (-baseline, 0, 0)`` in mm, no distortion.
+
+    Raises
+    ------
+    InputError
+        A missing key or an unreadable value: one line naming the file and the key.
+    """
+    values: dict[str, str] = {}
+    for line in text.splitlines():
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        if "=" not in line:
+            raise InputError(f"{source}: expected `key=value` lines, got {line[:40]!r}")
+        k, v = line.split("=", 1)
+        values[k.strip()] = v.strip()
+    for key in ("cam0", "cam1", "doffs", "baseline", "width", "height"):
+        if key not in values:
+            raise InputError(f"{source}: missing key `{key}`")
+
+    def matrix(key: str) -> np.ndarray:
+        m = _MB_MATRIX.match(values[key])
+        try:
+            rows = [[float(x) for x in r.split()] for r in m.group(1).split(";")] if m else None
+            K = np.array(rows, dtype=np.float64)
+        except (ValueError, AttributeError, TypeError):
+            K = None
+        if K is None or K.shape != (3, 3) or not np.isfinite(K).all() or K[0, 0] <= 0:
+            raise InputError(f"{source}: `{key}` must be a 3x3 matrix like [f 0 cx; 0 f cy; 0 0 1]")
+        return K
+
+    def number(key: str, kind=float):
+        try:
+            v = kind(float(values[key]))
+        except ValueError:
+            raise InputError(f"{source}: `{key}` must be a number, got {values[key]!r}") from None
+        if not math.isfinite(v):
+            raise InputError(f"{source}: `{key}` must be finite")
+        return v
+
+    K1, K2 = matrix("cam0"), matrix("cam1")
+    baseline = number("baseline")
+    if baseline <= 0:
+        raise InputError(f"{source}: `baseline` must be > 0, got {baseline}")
+    w, h = number("width", int), number("height", int)
+    ndisp = number("ndisp", int) if "ndisp" in values else None
+    return Calibration(K1=K1, D1=np.zeros(5), K2=K2, D2=np.zeros(5), R=np.eye(3),
+                       T=np.array([-baseline, 0.0, 0.0]), size=(w, h), doffs=number("doffs"), ndisp=ndisp,
+                       unit="mm", rectified=True, source=source)
+
+
+def parse_opencv_calib(text: str, source: str = "stereo.yml") -> Calibration:
+    """Parse an OpenCV stereo calibration (YAML or XML as ``cv2.FileStorage`` writes it: ``K1``, ``D1``, ``K2``,
+    ``D2``, ``R``, ``T``, and optionally ``image_width``/``image_height`` or ``image_size``).
+
+    Parameters
+    ----------
+    text : str
+        The file's content (``%YAML:1.0`` header and ``!!opencv-matrix`` nodes are fine).
+    source : str
+        The file name, for messages.
+
+    Returns
+    -------
+    Calibration
+
+    Raises
+    ------
+    InputError
+        Unparsable text, a missing key or a matrix of the wrong shape: one line naming the file and the key.
+    """
+    try:
+        fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+    except (cv2.error, SystemError) as exc:  # the Python binding wraps some parser errors in SystemError
+        cause = exc.__cause__ or exc.__context__ or exc
+        msg = str(cause).strip().splitlines()[-1] if str(cause).strip() else "parse error"
+        raise InputError(f"{source}: not a readable OpenCV YAML/XML file ({msg})") from None
+    if not fs.isOpened():
+        raise InputError(f"{source}: not a readable OpenCV YAML/XML file")
+    try:
+        def mat(key: str, shape: tuple | None) -> np.ndarray:
+            node = fs.getNode(key)
+            m = None if node.empty() else node.mat()
+            if m is None:
+                raise InputError(f"{source}: missing key `{key}`")
+            m = np.asarray(m, dtype=np.float64)
+            if shape is not None and m.size != int(np.prod(shape)):
+                raise InputError(f"{source}: `{key}` must have {int(np.prod(shape))} entries {shape}, got {m.shape}")
+            if not np.isfinite(m).all():
+                raise InputError(f"{source}: `{key}` contains NaN or inf")
+            return m.reshape(shape) if shape is not None else m.ravel()
+
+        K1, K2 = mat("K1", (3, 3)), mat("K2", (3, 3))
+        D1, D2 = mat("D1", None), mat("D2", None)
+        R = mat("R", (3, 3))
+        if not np.allclose(R @ R.T, np.eye(3), atol=1e-4):
+            raise InputError(f"{source}: `R` is not a rotation matrix")
+        T = mat("T", (3,))
+        size = None
+        wn, hn, sn = fs.getNode("image_width"), fs.getNode("image_height"), fs.getNode("image_size")
+        if not wn.empty() and not hn.empty():
+            size = (int(wn.real()), int(hn.real()))
+        elif not sn.empty() and sn.isSeq() and sn.size() == 2:
+            size = (int(sn.at(0).real()), int(sn.at(1).real()))
+    finally:
+        fs.release()
+    for key, D in (("D1", D1), ("D2", D2)):
+        if D.size not in (4, 5, 8, 12, 14):
+            raise InputError(f"{source}: `{key}` must hold 4, 5, 8, 12 or 14 coefficients, got {D.size}")
+    if np.linalg.norm(T) == 0:
+        raise InputError(f"{source}: `T` is zero: the two cameras coincide (no baseline)")
+    return Calibration(K1=K1, D1=D1, K2=K2, D2=D2, R=R, T=T, size=size, source=source)
+
+
+def parse_calibration(text: str, source: str) -> Calibration:
+    """A Middlebury ``calib.txt`` or an OpenCV stereo YAML/XML file, told apart by content."""
+    head = text.lstrip()[:200]
+    if head.startswith("%YAML") or head.startswith("<?xml") or "!!opencv-matrix" in text or "K1" in head[:40]:
+        return parse_opencv_calib(text, source)
+    return parse_middlebury_calib(text, source)
+
+
+def rectify_calibrated(calib: Calibration, size, pts1=None, pts2=None, margin: float = 1.0) -> Rectification:
+    """Calibrated rectification (``cv2.stereoRectify``, ``cv2.initUndistortRectifyMap``) with the disparity shift.
+
+    Parameters
+    ----------
+    calib : Calibration
+        Intrinsics, distortion and pose of the rig; its size must match ``size``.
+    size : (int, int)
+        (width, height) of both images.
+    pts1, pts2 : (N, 2) array_like, optional
+        Matches (original pixels); those that land on the same row (within 2 px) after rectification set the
+        disparity shift and ``max_disp``. Without them the shift is 0 and ``max_disp`` comes from ``ndisp``
+        (or 128).
+    margin : float
+        Where the smallest (robust) match disparity lands, pixels.
+
+    Returns
+    -------
+    Rectification
+        With ``maps`` (remap tables) and an exact ``depth`` geometry.
+    """
+    w, h = _check_size(size)
+    calib.check_size((w, h))
+    R1, R2, P1, P2, _, _, _ = cv2.stereoRectify(calib.K1, calib.D1, calib.K2, calib.D2, (w, h), calib.R,
+                                                calib.T.reshape(3, 1), flags=0, alpha=0)
+    P1, P2 = np.asarray(P1, float), np.asarray(P2, float)
+    shift, lo, hi, vert = 0.0, 0.0, float(calib.ndisp or 128) - 16.0, np.empty(0)
+    if pts1 is not None and pts2 is not None and len(pts1) > 0:
+        p1 = np.asarray(pts1, np.float64).reshape(-1, 1, 2)
+        p2 = np.asarray(pts2, np.float64).reshape(-1, 1, 2)
+        q1 = cv2.undistortPoints(p1, calib.K1, calib.D1, R=R1, P=P1).reshape(-1, 2)
+        q2 = cv2.undistortPoints(p2, calib.K2, calib.D2, R=R2, P=P2).reshape(-1, 2)
+        dy = np.abs(q1[:, 1] - q2[:, 1])
+        keep = dy <= 2.0
+        if keep.sum() >= 8:
+            vert = dy[keep]
+            shift, lo, hi = _disparity_shift(q1[keep, 0], q2[keep, 0], margin)
+    P2s = P2.copy()
+    P2s[0] += shift * P2s[2]
+    m1 = cv2.initUndistortRectifyMap(calib.K1, calib.D1, R1, P1[:, :3], (w, h), cv2.CV_32FC1)
+    m2 = cv2.initUndistortRectifyMap(calib.K2, calib.D2, R2, P2s[:, :3], (w, h), cv2.CV_32FC1)
+    H_left = P1[:, :3] @ R1 @ np.linalg.inv(calib.K1)
+    H_right = P2s[:, :3] @ R2 @ np.linalg.inv(calib.K2)
+    f = float(P1[0, 0])
+    baseline = abs(float(P2[0, 3]) / float(P2[0, 0])) if P2[0, 3] != 0 else abs(float(P2[1, 3]) / float(P2[1, 1]))
+    # columns of the principal points, right minus left (the shift moved the right one)
+    depth = DepthGeometry(focal=f, cx=float(P1[0, 2]), cy=float(P1[1, 2]), baseline=baseline,
+                          doffs=float(P2s[0, 2] - P1[0, 2]), unit=calib.unit, exact=True)
+    return Rectification(H_left=H_left / H_left[2, 2], H_right=H_right / H_right[2, 2], size=(w, h),
+                         shift=shift, max_disp=_max_disp(hi), disparity_range=(lo, hi), vertical_error=vert,
+                         depth=depth, maps=(m1[0], m1[1], m2[0], m2[1]))
+
+
+def rectified_depth_geometry(calib: Calibration) -> DepthGeometry:
+    """Depth geometry of an already rectified pair described by ``calib`` (Middlebury: used as is).
+
+    Raises
+    ------
+    InputError
+        An OpenCV calibration whose cameras are not rectified (a rotation, lens distortion, different focal
+        lengths or rows, or a baseline off the x axis): the pair needs rectifying first.
+    """
+    if not calib.rectified:
+        K1, K2 = calib.K1, calib.K2
+        off_axis = np.abs(calib.T[1:]).max() > 1e-6 * calib.baseline
+        if (not np.allclose(calib.R, np.eye(3), atol=1e-9) or np.any(calib.D1) or np.any(calib.D2) or off_axis
+                or not np.isclose(K1[0, 0], K2[0, 0]) or not np.isclose(K1[1, 2], K2[1, 2])):
+            raise InputError(f"{calib.source}: the calibration describes cameras that are not rectified (R, D1/D2, "
+                             "T or K1/K2); add --rectify")
+    doffs = calib.doffs if calib.rectified else calib.K2[0, 2] - calib.K1[0, 2]
+    return DepthGeometry(focal=float(calib.K1[0, 0]), cx=float(calib.K1[0, 2]), cy=float(calib.K1[1, 2]),
+                         baseline=calib.baseline, doffs=float(doffs), unit=calib.unit, exact=True)
+
+
+def warp_pair(left: np.ndarray, right: np.ndarray, rect: Rectification) -> tuple[np.ndarray, np.ndarray]:
+    """Both images in the rectified frame (bilinear; outside the original: 0)."""
+    w, h = rect.size
+    if rect.maps is not None:
+        lx, ly, rx, ry = rect.maps
+        return (cv2.remap(left, lx, ly, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT),
+                cv2.remap(right, rx, ry, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT))
+    return (cv2.warpPerspective(left, rect.H_left, (w, h), flags=cv2.INTER_LINEAR),
+            cv2.warpPerspective(right, rect.H_right, (w, h), flags=cv2.INTER_LINEAR))
+
+
+def max_disp_from_matches(pts1, pts2, max_dy: float = 1.5) -> int:
+    """``max_disp`` of an already rectified pair from its matches on the same row (within ``max_dy`` px).
+
+    Raises
+    ------
+    EstimationError
+        Fewer than 8 matches on the same row: the pair does not look rectified (use ``--rectify``).
+    """
+    p1 = np.asarray(pts1, dtype=np.float64).reshape(-1, 2)
+    p2 = np.asarray(pts2, dtype=np.float64).reshape(-1, 2)
+    keep = np.abs(p1[:, 1] - p2[:, 1]) <= max_dy
+    d = p1[keep, 0] - p2[keep, 0]
+    d = d[d >= 0]
+    if len(d) < 8:
+        raise EstimationError(f"only {len(d)} matches lie on the same row with a disparity >= 0: the pair does not "
+                              "look rectified; pass `--rectify` or a number to `--max-disp`")
+    return _max_disp(robust_disparity_range(d)[1])
+
+
+def looks_rectified(pts1, pts2, max_dy: float = 1.0, share: float = 0.9) -> bool:
+    """Whether a pair is already rectified: at least ``share`` of its matches lie within ``max_dy`` px of the same
+    row (a stage can then skip rectification, which makes it a no-op for rectified pairs).
+
+    Parameters
+    ----------
+    pts1, pts2 : (N, 2) array_like
+        Putative matches (left, right); the ratio test leaves a few outliers, hence ``share`` < 1.
+    max_dy : float
+        Row tolerance, pixels (SIFT keypoints are good to a few tenths of a pixel).
+    share : float
+        Fraction in (0, 1].
+    """
+    if not (0 < share <= 1) or not max_dy > 0:
+        raise InputError(f"`share` must be in (0, 1] and `max_dy` > 0, got {share!r} and {max_dy!r}")
+    p1 = np.asarray(pts1, dtype=np.float64).reshape(-1, 2)
+    p2 = np.asarray(pts2, dtype=np.float64).reshape(-1, 2)
+    if len(p1) == 0 or len(p1) != len(p2):
+        return False
+    return bool(np.mean(np.abs(p1[:, 1] - p2[:, 1]) <= max_dy) >= share)

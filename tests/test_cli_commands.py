@@ -1,0 +1,425 @@
+"""The commands as a user meets them: start-up cost, help examples that run, pictures, one vocabulary, hints.
+
+The samples are built once for this module into a temporary folder (``cvpipe.samples``, as the ``samples`` stage
+does), and each help example runs there verbatim, from a working directory whose ``data/samples`` is that folder.
+"""
+
+from __future__ import annotations
+
+import glob
+import json
+import os
+import re
+import shlex
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+from cvpipe import cli, io, samples
+from cvpipe.params import SamplesParams
+
+ROOT = Path(__file__).resolve().parents[1]
+COMMANDS = [name for name in cli.COMMANDS if name != "bench"]
+
+
+def _env() -> dict:
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    return env
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory) -> Path:
+    """A working directory whose ``data/samples`` holds the bundled samples (fewer logo scenes: examples use one)."""
+    root = tmp_path_factory.mktemp("cli")
+    out = root / "data" / "samples"
+    for task, s in samples.build_all(SamplesParams().seed, logo_scenes=2, logo_negatives=1).items():
+        for name, img in s.images.items():
+            io.save_image(out / task / name, img)
+        for name, arrays in s.arrays.items():
+            io.save_npz(out / task / name, **arrays)
+        io.save_json(out / task / "truth.json", s.truth)
+    return root
+
+
+def _example_argv(example: str, cwd: Path) -> list[str]:
+    """The example's arguments after ``cvpipe``, with shell globs expanded in ``cwd`` as a shell would."""
+    words = shlex.split(example)
+    assert words[0] == "cvpipe"
+    argv = []
+    for w in words[1:]:
+        if any(c in w for c in "*?["):
+            hits = sorted(glob.glob(w, root_dir=cwd))
+            assert hits, f"the example's pattern {w} matches no sample file"
+            argv += hits
+        else:
+            argv.append(w)
+    return argv
+
+
+def _module(name: str):
+    import importlib
+
+    return importlib.import_module(f"cvpipe.commands.{cli.COMMANDS[name]}")
+
+
+# ------------------------------------------------------------------------------------------------------ start-up
+
+
+@pytest.mark.parametrize("argv", [["--version"], ["--help"], *[[c, "--help"] for c in cli.COMMANDS]],
+                         ids=lambda a: " ".join(a))
+def test_help_and_version_import_neither_cv2_nor_numba(argv):
+    code = ("import sys, time\nt0 = time.perf_counter()\nfrom cvpipe import cli\n"
+            f"try:\n    cli.main({argv!r})\nexcept SystemExit:\n    pass\n"
+            "heavy = sorted(m for m in ('cv2', 'numba', 'scipy') if m in sys.modules)\n"
+            "print('RESULT', ','.join(heavy) or '-', time.perf_counter() - t0, file=sys.stderr)\n")
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=_env(), cwd=ROOT)
+    wall = time.perf_counter() - t0
+    last = proc.stderr.strip().splitlines()[-1].split()
+    assert last[0] == "RESULT", proc.stderr
+    assert last[1] == "-", f"cvpipe {' '.join(argv)} imported {last[1]}"
+    # generous: ~0.1 s when idle; the bound only catches a heavy import sneaking back (cv2 + numba alone are ~1 s,
+    # and this machine is shared, so wall times vary several-fold)
+    assert wall < 2.0, f"cvpipe {' '.join(argv)} took {wall:.2f} s"
+
+
+def test_a_command_imports_only_what_it_runs(workdir):
+    """`cvpipe hough` needs cv2 and numba (which imports the scipy package), not the other tasks' modules."""
+    img = workdir / "data" / "samples" / "hough" / "synthetic_grid.png"
+    code = ("import sys\nfrom cvpipe import cli\n"
+            f"cli.main(['hough', {str(img)!r}, '--method', 'opencv', '--json'])\n"
+            "heavy = ('scipy.stats', 'scipy.sparse', 'cvpipe.logos', 'cvpipe.stereo', 'cvpipe.panorama',"
+            " 'cvpipe.defects', 'cvpipe.homography')\n"
+            "print('RESULT', ','.join(sorted(m for m in heavy if m in sys.modules)) or '-', file=sys.stderr)\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=_env(), cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr.strip().splitlines()[-1] == "RESULT -"
+
+
+def test_cold_numba_cache_is_announced_once(workdir, tmp_path):
+    """First run with an empty cache folder says it compiles; the second run (cache warm) says nothing."""
+    img = workdir / "data" / "samples" / "hough" / "synthetic_grid.png"
+    env = dict(_env(), NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    argv = [sys.executable, "-m", "cvpipe.cli", "hough", str(img), "--threshold", "100"]
+    first = subprocess.run(argv, capture_output=True, text=True, env=env, cwd=ROOT)
+    second = subprocess.run(argv, capture_output=True, text=True, env=env, cwd=ROOT)
+    assert first.returncode == 0 and second.returncode == 0, first.stderr + second.stderr
+    assert re.search(r"compiling the hough kernels once, about \d+ s", first.stderr), first.stderr
+    assert "compiling" not in second.stderr, second.stderr
+    assert first.stdout == second.stdout  # the note changes nothing else
+    quiet = subprocess.run(argv + ["-q"], capture_output=True, text=True, env=dict(env, NUMBA_CACHE_DIR=str(
+        tmp_path / "numba2")), cwd=ROOT)
+    assert quiet.returncode == 0 and quiet.stderr == ""
+
+
+def test_every_numba_kernel_is_cached_on_disk():
+    """A kernel without cache=True would recompile in every process: the warm start-up depends on all of them."""
+    import importlib
+    import pkgutil
+
+    import cvpipe
+
+    kernels = []
+    for info in pkgutil.walk_packages(cvpipe.__path__, "cvpipe."):
+        if info.name.startswith(("cvpipe.bench", "cvpipe.commands")):
+            continue
+        module = importlib.import_module(info.name)
+        kernels += [(info.name, k) for k, v in vars(module).items()
+                    if hasattr(v, "py_func") and getattr(v, "__module__", None) == info.name]
+    assert kernels
+    uncached = [f"{m}.{k}" for m, k in kernels
+                if type(getattr(importlib.import_module(m), k)._cache).__name__ == "NullCache"]
+    assert not uncached, f"numba kernels without cache=True: {uncached}"
+
+
+# ------------------------------------------------------------------------------------------------ help examples
+
+
+@pytest.mark.parametrize("name", COMMANDS)
+def test_help_example_runs_on_the_samples_and_names_its_pictures(name, workdir, monkeypatch, capsys):
+    """Each `cvpipe <cmd> --help` example runs as printed; every picture it writes is named and readable."""
+    module = _module(name)
+    with pytest.raises(SystemExit):
+        cli.main([name, "--help"])
+    text = capsys.readouterr().out
+    assert text.rstrip().endswith(f"example:\n  {module.EXAMPLE}")  # the example is the last thing shown
+    monkeypatch.chdir(workdir)
+    argv = _example_argv(module.EXAMPLE, workdir)
+    assert cli.main(argv) == 0
+    out = capsys.readouterr().out
+    records = json.loads(out) if "--json" in argv else None
+    written = []
+    for rec in (records if isinstance(records, list) else [records] if records else []):
+        written += [rec[k] for k in ("overlay", "out") if rec.get(k)]
+    for flag in ("--overlay", "-o"):
+        if flag in argv:
+            path = argv[argv.index(flag) + 1]
+            if records is not None:
+                assert path in written, f"the JSON does not name {path}"
+            else:
+                assert path in out, f"the text output does not name {path}"
+                written.append(path)
+    assert written or name == "inspect"  # inspect names its pictures per probe (test_defects checks them)
+    for path in written:
+        if path.endswith(".png"):
+            img = cv2.imread(str(workdir / path))
+            assert img is not None and img.ndim == 3 and img.dtype == np.uint8, path
+
+
+def test_top_level_help_example_runs_on_the_samples(workdir, monkeypatch, capsys):
+    with pytest.raises(SystemExit):
+        cli.main(["--help"])
+    assert f"example:\n  {cli.EXAMPLE}\n" in capsys.readouterr().out
+    monkeypatch.chdir(workdir)
+    assert cli.main(_example_argv(cli.EXAMPLE, workdir)) == 0
+    assert "lines (ours)" in capsys.readouterr().out
+
+
+def _run_json(argv, capsys) -> dict:
+    assert cli.main(argv) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_pictures_have_the_input_size(workdir, tmp_path, capsys):
+    s = workdir / "data" / "samples"
+    img = s / "hough" / "synthetic_grid.png"
+    h, w = cv2.imread(str(img)).shape[:2]
+    res = _run_json(["hough", str(img), "--threshold", "100", "--overlay", str(tmp_path / "l.png"), "--json"], capsys)
+    pic = cv2.imread(res["overlay"])
+    assert pic.shape == (h, w, 3)
+    # the lines are drawn in red (BGR 0, 0, 255) over a black and white grid: red pixels exist only with lines
+    red = (pic[..., 2] > 200) & (pic[..., 1] < 80) & (pic[..., 0] < 80)
+    assert res["lines"] and red.sum() > w
+
+    a, b = s / "homography" / "0_astronaut_a.jpg", s / "homography" / "0_astronaut_b.jpg"
+    res = _run_json(["homography", str(a), str(b), "--overlay", str(tmp_path / "h.png"), "--json"], capsys)
+    A, pic = cv2.imread(str(a)), cv2.imread(res["overlay"])
+    assert pic.shape == A.shape
+    # the checkerboard alternates A and warped B: A's tiles are A itself, so a good share of pixels equals A
+    assert 0.2 < np.mean(np.all(pic == A, axis=2)) < 0.9
+
+    left, right = s / "stereo" / "left.png", s / "stereo" / "right.png"
+    res = _run_json(["stereo", str(left), str(right), "--max-disp", "64", "--method", "opencv_bm", "-o",
+                     str(tmp_path / "d.npy"), "--overlay", str(tmp_path / "d.png"), "--json"], capsys)
+    L, pic = cv2.imread(str(left)), cv2.imread(res["overlay"])
+    assert pic.shape[0] == L.shape[0] and pic.shape[1] > L.shape[1]  # the image plus a colour bar on its right
+    assert np.load(res["out"], allow_pickle=False).shape == L.shape[:2]
+
+    scene = s / "logo" / "scenes" / "scene_00.jpg"
+    truth = json.loads((s / "logo" / "truth.json").read_text())["scenes"][0]
+    res = _run_json(["logo", str(scene), "--gallery", str(s / "logo" / "gallery"), "--overlay",
+                     str(tmp_path / "o.png"), "--json"], capsys)[0]
+    S, pic = cv2.imread(str(scene)), cv2.imread(res["overlay"])
+    assert pic.shape == S.shape and res["brand"] == truth["brand"]
+    # the outline is drawn on the reported quad: pixels on its edges changed, pixels far from it did not
+    q = np.array(res["quad"])
+    mid = (q[0] + q[1]) / 2
+    assert np.abs(pic[int(round(mid[1])), int(round(mid[0]))].astype(int)
+                  - S[int(round(mid[1])), int(round(mid[0]))].astype(int)).sum() > 60
+    far = np.ones(S.shape[:2], bool)
+    x0, y0 = np.floor(q.min(0)).astype(int) - 40
+    x1, y1 = np.ceil(q.max(0)).astype(int) + 40
+    far[max(0, y0 - 60):y1, max(0, x0):x1 + 300] = False  # the outline, its label above it
+    assert np.array_equal(pic[far], S[far])
+
+
+def test_inspect_overlay_per_probe(workdir, tmp_path, capsys):
+    s = workdir / "data" / "samples" / "defect"
+    probes = [str(s / "probes" / "probe_00.png"), str(s / "probes" / "probe_01.png")]
+    one = _run_json(["inspect", str(s / "reference.png"), probes[0], "--overlay", str(tmp_path / "r.png"), "--json"],
+                    capsys)
+    assert one[0]["overlay"] == str(tmp_path / "r.png")
+    assert cv2.imread(one[0]["overlay"]).shape == cv2.imread(probes[0]).shape
+    two = _run_json(["inspect", str(s / "reference.png"), *probes, "--overlay", str(tmp_path / "dir") + "/", "--json"],
+                    capsys)
+    assert [r["overlay"] for r in two] == [str(tmp_path / "dir" / "probe_00_regions.png"),
+                                           str(tmp_path / "dir" / "probe_01_regions.png")]
+    assert all(cv2.imread(r["overlay"]) is not None for r in two)
+
+
+def test_stereo_png_output_is_the_picture(workdir, tmp_path, capsys):
+    s = workdir / "data" / "samples" / "stereo"
+    res = _run_json(["stereo", str(s / "left.png"), str(s / "right.png"), "--max-disp", "64", "--method",
+                     "opencv-bm", "-o", str(tmp_path / "d.png"), "--json"], capsys)
+    assert res["out"] == str(tmp_path / "d.png") and cv2.imread(res["out"]) is not None
+
+
+def test_stitch_json_names_files(workdir, tmp_path, capsys):
+    files = sorted(glob.glob(str(workdir / "data" / "samples" / "panorama" / "coffee" / "*.jpg")))
+    bad = tmp_path / "broken.jpg"
+    bad.write_bytes(b"not an image")
+    res = _run_json(["stitch", *files, str(bad), "-o", str(tmp_path / "p.png"), "--overlay", str(tmp_path / "o.png"),
+                     "--json"], capsys)
+    assert sorted(res["used"]) == files and res["reference"] in files
+    assert res["dropped"] == [{"image": str(bad), "reason": res["dropped"][0]["reason"]}]
+    assert res["out"] == str(tmp_path / "p.png")
+    pano, pic = cv2.imread(res["out"]), cv2.imread(res["overlay"])
+    assert list(pano.shape[1::-1]) == res["size"] and pic.shape == pano.shape
+    assert 0 < np.mean(np.any(pic != pano, axis=2)) < 0.2  # outlines and names drawn over an unchanged panorama
+
+
+# ------------------------------------------------------------------------------------------------ vocabulary
+
+
+def test_choices_match_the_registries():
+    from cvpipe import features, homography, hough, stereo, warping
+    from cvpipe.commands import homography as c_hom, hough as c_hough, inspect as c_insp, logo as c_logo
+    from cvpipe.commands import stereo as c_stereo, stitch as c_stitch
+
+    assert set(c_hough.METHODS) == set(hough.IMPLEMENTATIONS)
+    assert set(c_hom.METHODS) == set(homography.METHODS)
+    assert set(c_stereo.CLI_METHODS) == set(stereo.METHODS)
+    assert set(c_stitch.PROJECTIONS) == set(warping.PROJECTIONS)
+    for module in (c_hom, c_logo, c_stitch, c_insp):
+        assert set(module.DETECTORS) == set(features.DETECTORS), module.__name__
+
+
+def test_method_names_are_those_of_dvc_yaml():
+    """The CLI's --method choices are the names the pipeline's matrix stages use (one name per method)."""
+    from cvpipe.commands import homography as c_hom, hough as c_hough, stereo as c_stereo
+
+    dvc = yaml.safe_load((ROOT / "dvc.yaml").read_text())
+    matrix = {name: stage["matrix"] for name, stage in dvc["stages"].items() if "matrix" in stage}
+
+    def values(stage):
+        m = matrix[stage]
+        return set(m.get("method", m.get("impl", [])))
+
+    assert values("homography_estimate") == set(c_hom.METHODS)
+    assert values("stereo_disparity") == set(c_stereo.CLI_METHODS)
+    assert values("hough_lines") == set(c_hough.METHODS)
+
+
+def _parser(name):
+    parser = cli.build_parser()
+    sub = parser._subparsers._group_actions[0]
+    return sub.load(name)
+
+
+@pytest.mark.parametrize("name", COMMANDS)
+def test_enumerated_flags_list_their_choices(name):
+    for action in _parser(name)._actions:
+        if action.nargs != 0 and set(action.option_strings) & {"--method", "--detector", "--projection", "--blender",
+                                                                "--refine"}:
+            assert action.choices, f"cvpipe {name} {action.option_strings[0]} lists no choices"
+
+
+@pytest.mark.parametrize("argv", [["homography", "a", "b", "--method", "opencv-ransac"],
+                                  ["stereo", "l", "r", "--max-disp", "16", "-o", "d.npy", "--method", "opencv-sgbm"]])
+def test_hyphen_and_underscore_spellings_are_one_method(argv):
+    args = cli.build_parser().parse_args(argv)
+    assert args.method == argv[-1].replace("-", "_")
+
+
+def test_hough_impl_is_a_deprecated_spelling_of_method(workdir, capsys):
+    img = str(workdir / "data" / "samples" / "hough" / "synthetic_grid.png")
+    new = _run_json(["hough", img, "--threshold", "100", "--method", "opencv", "--json"], capsys)
+    assert cli.main(["hough", img, "--threshold", "100", "--impl", "opencv", "--json"]) == 0
+    cap = capsys.readouterr()
+    assert json.loads(cap.out) == new
+    assert "`--impl` is deprecated, use `--method`" in cap.err and len(cap.err.strip().splitlines()) == 1
+
+
+def test_hough_degrees_and_max_lines(workdir, capsys):
+    img = str(workdir / "data" / "samples" / "hough" / "coffee_lines.png")
+    every = _run_json(["hough", img, "--threshold", "80", "--max-lines", "0", "--json"], capsys)
+    top = _run_json(["hough", img, "--threshold", "80", "--max-lines", "3", "--json"], capsys)
+    assert every["total"] == top["total"] == len(every["lines"]) > 3
+    assert top["lines"] == every["lines"][:3]  # the strongest lines, in the cv2 contract [rho, theta_rad, votes]
+    for (rho, theta, votes), d in zip(top["lines"], top["lines_deg"]):
+        # theta_deg is the same angle as theta (radians) to the 6 decimals printed
+        assert d["rho_px"] == rho and d["votes"] == votes and abs(d["theta_deg"] - np.degrees(theta)) < 1e-5
+
+
+def test_hough_two_images_get_the_hough_usage(workdir, capsys):
+    img = str(workdir / "data" / "samples" / "hough" / "synthetic_grid.png")
+    code = cli.main(["hough", img, img, "--bogus"])
+    err = capsys.readouterr().err
+    # one line naming the subcommand and pointing at its own help, not the top-level usage
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "hough: unrecognized arguments:" in err and "--bogus" in err and "cvpipe hough --help" in err
+
+
+def test_stitch_hints_name_flags_that_exist(tmp_path, capsys):
+    """A failed panorama's hint names flags of `cvpipe stitch`, not params.yaml keys."""
+    rng = np.random.default_rng(0)
+    paths = []
+    for k in range(2):  # two unrelated noise images: nothing matches
+        p = tmp_path / f"n{k}.png"
+        io.save_image(p, rng.integers(0, 256, (120, 160, 3), dtype=np.uint8))
+        paths.append(str(p))
+    assert cli.main(["stitch", *paths, "-o", str(tmp_path / "p.png")]) == 1
+    err = capsys.readouterr().err
+    named = set(re.findall(r"--[a-z][a-z-]+", err))
+    assert named, err
+    options = {o for a in _parser("stitch")._actions for o in a.option_strings}
+    assert named <= options, f"hints name missing flags: {sorted(named - options)}"
+    assert "min_inliers" not in err and "min_confidence" not in err
+
+
+def test_verbose_logs_steps_and_quiet_silences_notes(workdir, capsys):
+    img = str(workdir / "data" / "samples" / "hough" / "synthetic_grid.png")
+    assert cli.main(["-v", "hough", img, "--threshold", "100"]) == 0
+    err = capsys.readouterr().err
+    assert re.search(r"cvpipe: lines \(ours\): \d+\.\d+ s", err), err
+    assert cli.main(["hough", img, "--threshold", "100", "--impl", "ours", "-q"]) == 0
+    assert capsys.readouterr().err == ""  # the deprecation note too
+    assert cli.main(["hough", img, "--threshold", "100"]) == 0
+    assert "cvpipe: lines" not in capsys.readouterr().err  # steps are not logged by default
+
+
+# ------------------------------------------------------------------------------------------------ several logos
+
+
+def test_two_gallery_brands_in_one_photo_are_both_found(workdir, tmp_path, capsys):
+    """A photo with two gallery marks pasted at known places: both brands reported, each outline where it was put."""
+    gallery = workdir / "data" / "samples" / "logo" / "gallery"
+    rng = np.random.default_rng(1)
+    scene = samples.fit(samples.photo("coffee"), 800, 600)
+    truth = {}
+    for brand, centre in (("starbucks", (220, 300)), ("redbull", (580, 280))):
+        mark = cv2.imread(str(gallery / f"{brand}.png"))
+        H = samples.random_view(rng, mark.shape[0] - 1, centre, 260 / mark.shape[0], 10, 0.03)
+        scene = samples.paste(scene, mark, H)
+        h, w = mark.shape[:2]
+        truth[brand] = samples.apply_homography(H, samples.corners(w, h))
+    path = tmp_path / "two.png"
+    io.save_image(path, scene)
+    rec = _run_json(["logo", str(path), "--gallery", str(gallery), "--overlay", str(tmp_path / "o.png"), "--json"],
+                    capsys)[0]
+    found = {d["brand"]: np.array(d["quad"]) for d in rec["logos"]}
+    assert set(found) == set(truth)  # both brands, and nothing else
+    assert rec["brand"] == rec["logos"][0]["brand"]  # the one-brand answer is the best of the list
+    scores = [d["score"] for d in rec["logos"]]
+    assert scores == sorted(scores, reverse=True)
+    for brand, quad in found.items():
+        # corners within 5 px of where the mark was pasted (2% of the ~260 px mark; each outline rests on 70+ inliers)
+        assert np.abs(quad - truth[brand]).max() < 5.0, brand
+
+
+def test_overlapping_outlines_keep_only_the_best():
+    from types import SimpleNamespace
+
+    from cvpipe.commands.logo import every_logo, quad_iou
+
+    sq = np.array([[0, 0], [100, 0], [100, 100], [0, 100]], float)
+    assert quad_iou(sq, sq) == pytest.approx(1.0)
+    assert quad_iou(sq, sq + [200, 0]) == 0.0
+    assert quad_iou(sq, sq + [50, 0]) == pytest.approx(50 * 100 / (2 * 100 * 100 - 50 * 100))  # 1/3
+
+    def hyp(brand, score, quad, plausible=True):
+        return SimpleNamespace(brand=brand, score=score, inliers=20, quad=quad, plausible=plausible)
+
+    det = SimpleNamespace(hypotheses=[
+        hyp("a", 50.0, sq), hyp("b", 40.0, sq + [10, 10]),  # b overlaps a (IoU 0.68): suppressed
+        hyp("c", 30.0, sq + [300, 0]),  # elsewhere: kept
+        hyp("d", 90.0, sq + [600, 0], plausible=False),  # implausible: never reported
+        hyp("e", -1.0, sq + [900, 0])])  # below the threshold 0
+    assert [h.brand for h in every_logo(det, 0.0)] == ["a", "c"]
+    assert [h.brand for h in every_logo(det, 0.0, max_overlap=0.9)] == ["a", "b", "c"]
