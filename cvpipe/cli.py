@@ -19,10 +19,13 @@ import io
 import json
 import os
 import sys
+import warnings
 from types import ModuleType
 
 from . import __version__
-from .errors import CvpipeError
+from .errors import BudgetWarning, CvpipeError
+
+_SHOW_WARNING = warnings.showwarning
 
 #: subcommand name -> module under ``cvpipe.commands`` (the order is the order of ``cvpipe --help``)
 COMMANDS = {
@@ -199,13 +202,37 @@ def _classify(exc: BaseException) -> tuple[str, str | None, int]:
     return f"internal error ({type(exc).__name__}: {exc}); set CVPIPE_DEBUG=1 for the traceback", None, 1
 
 
+def _note(message, category, filename, lineno, file=None, line=None) -> None:
+    """Our own warnings (work scaled down to fit the memory budget) as one ``cvpipe: note:`` line on stderr."""
+    if issubclass(category, BudgetWarning):
+        print(f"cvpipe: note: {message}", file=sys.stderr)
+    else:
+        _SHOW_WARNING(message, category, filename, lineno, file, line)
+
+
+def _unraisable(hook):
+    """A ``sys.unraisablehook`` that turns a Ctrl-C swallowed in a C callback into a real interrupt.
+
+    numba's cache and LLVM callbacks run Python code from C; a KeyboardInterrupt raised there cannot propagate
+    and Python would print its traceback and carry on. Re-raising the signal delivers the interrupt again at the
+    next point where Python can raise it, so the command stops with exit 130 and one line.
+    """
+
+    def on_unraisable(info):
+        if info.exc_type is not None and issubclass(info.exc_type, KeyboardInterrupt):
+            import signal
+
+            signal.raise_signal(signal.SIGINT)
+            return
+        hook(info)
+
+    return on_unraisable
+
+
 def _fail(message: str, file: str | None, code: int, json_mode: bool) -> int:
     """Print the one stderr line and, in ``--json`` mode, the one JSON record; return the exit status."""
-    line = " ".join(str(message).split()) or "failed"
-    if not line.startswith("interrupted"):
-        print(f"cvpipe: error: {line}", file=sys.stderr)
-    else:
-        print("cvpipe: error: interrupted", file=sys.stderr)
+    line = " ".join(str(message).split()) or "failed"  # one line, whatever the message holds
+    print(f"cvpipe: error: {line}", file=sys.stderr)
     if json_mode:
         print(json.dumps({"error": line, "file": file, "exit": code}, sort_keys=True))
     sys.stdout.flush()
@@ -243,6 +270,9 @@ def main(argv: list[str] | None = None) -> int:
     args_list = sys.argv[1:] if argv is None else list(argv)
     json_mode = "--json" in args_list
     debug = os.environ.get("CVPIPE_DEBUG", "") not in ("", "0")
+    shown, unraisable = warnings.showwarning, sys.unraisablehook
+    warnings.showwarning = _note
+    sys.unraisablehook = _unraisable(unraisable)
     try:
         parser = build_parser()
         args, code = _parse(parser, args_list, json_mode)
@@ -262,7 +292,19 @@ def main(argv: list[str] | None = None) -> int:
                 os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             return 141
         message, file, code = _classify(exc)
-        return _fail(message, file, code, json_mode)
+        code = _fail(message, file, code, json_mode)
+        if code == 130 and argv is None:
+            # run as the program: leave now with 130. A Ctrl-C that numba swallowed in a C callback may have left
+            # CPython's "unhandled KeyboardInterrupt" mark, which would turn a normal exit into death by SIGINT;
+            # every temporary is already gone (the context managers ran on the way out)
+            with contextlib.suppress(Exception):
+                sys.stdout.flush()
+                sys.stderr.flush()
+            os._exit(130)
+        return code
+    finally:
+        warnings.showwarning = shown
+        sys.unraisablehook = unraisable
 
 
 if __name__ == "__main__":

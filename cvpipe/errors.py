@@ -46,6 +46,10 @@ class BudgetError(InputError):
     """A buffer the input and parameters ask for exceeds the memory budget; the message names what to change."""
 
 
+class BudgetWarning(UserWarning):
+    """Work was scaled down to stay within the memory budget (the CLI prints it as one ``cvpipe: note:`` line)."""
+
+
 #: default memory budget of one command, in GB (10^9 bytes); ``CVPIPE_MEMORY_BUDGET_GB`` overrides it
 DEFAULT_MEMORY_BUDGET_GB = 4.0
 

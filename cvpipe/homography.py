@@ -60,6 +60,9 @@ _SPRT_DELTA0 = 0.01
 _FINAL_ROUNDS = 3
 _FINAL_LOSS = 1
 _FINAL_WSCALE = 3.0
+#: a model is accepted only when its number of false alarms is below this (a-contrario, Moisan & Stival's ORSA: an
+#: NFA < 1 means fewer than one model this good is expected from matches that are pure chance)
+MAX_NFA = 1.0
 #: index into the 6 unique entries (xx, xy, x, yy, y, 1) of a symmetric 3x3 p p^T
 _SYM6 = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]], dtype=np.int64)
 
@@ -78,12 +81,15 @@ class HomographyFit:
         RANSAC hypotheses drawn (degenerate samples that were rejected before solving are not counted).
     rms : float
         Root-mean-square reprojection error of the inliers under ``H``, in pixels of ``dst``.
+    log10_nfa : float
+        ``log10`` of the number of false alarms of the inlier count (see :func:`log10_nfa`); negative = significant.
     """
 
     H: np.ndarray
     inliers: np.ndarray
     iterations: int
     rms: float
+    log10_nfa: float = float("nan")
 
     @property
     def num_inliers(self) -> int:
@@ -1059,6 +1065,160 @@ def _finalize(src, dst, H0, thr2, refine, rounds, loss, wthr2):
     return H, mask, e2
 
 
+# ------------------------------------------------------------------------------------ significance vs chance
+
+
+def log10_nfa(inliers: int, matches: int, p: float) -> float:
+    """``log10`` of the number of false alarms of a homography with ``inliers`` among ``matches``.
+
+    A model is fixed by 4 matches and there are ``C(n, 4)`` of them; under the null hypothesis each of the other
+    ``n - 4`` matches agrees with it by chance with probability ``p``, so (ORSA, Moisan & Stival 2004, with the
+    binomial tail instead of its bound) ``NFA = C(n, 4) P[Binomial(n - 4, p) >= k - 4]``.
+
+    Parameters
+    ----------
+    inliers, matches : int
+        Inlier count ``k`` and number of putative matches ``n``.
+    p : float
+        Chance that an unrelated match is an inlier (see :func:`chance_probability`).
+
+    Returns
+    -------
+    float
+        ``log10 NFA``; below ``log10(MAX_NFA) = 0`` the count is significant. ``inf`` for fewer than 4 of either.
+    """
+    from scipy.special import bdtrc, gammaln
+
+    n, k = int(matches), int(inliers)
+    if n < 4 or k < 4:
+        return float("inf")
+    p = min(max(float(p), 0.0), 1.0)
+    log_models = (gammaln(n + 1) - gammaln(5) - gammaln(n - 3)) / math.log(10)
+    if k == 4 or p >= 1.0:
+        return float(log_models)
+    j = k - 4
+    if p <= 0.0:
+        return float("-inf")
+    tail = float(bdtrc(j - 1, n - 4, p))  # P[X > j - 1] = P[X >= j]
+    if tail <= 0.0:  # underflow: the first term of the tail bounds it from below and stays finite in logs
+        tail_log = (gammaln(n - 3) - gammaln(j + 1) - gammaln(n - 3 - j) + j * math.log(p)
+                    + (n - 4 - j) * math.log1p(-p)) / math.log(10)
+        return float(log_models + tail_log)
+    return float(log_models + math.log10(tail))
+
+
+@njit(cache=True)
+def _chance_hits(src, dst, H, thr2, rows):  # pragma: no cover - compiled
+    """Pairs (i, j), i in ``rows``, j != i, with ``|| dehom(H src_i) - dst_j ||^2 <= thr2``."""
+    hits = 0
+    for i in rows:
+        x, y = src[i, 0], src[i, 1]
+        w = H[2, 0] * x + H[2, 1] * y + H[2, 2]
+        if not abs(w) > 1e-12:
+            continue
+        u = (H[0, 0] * x + H[0, 1] * y + H[0, 2]) / w
+        v = (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w
+        for j in range(dst.shape[0]):
+            if j != i:
+                du = u - dst[j, 0]
+                dv = v - dst[j, 1]
+                if du * du + dv * dv <= thr2:
+                    hits += 1
+    return hits
+
+
+#: at most this many source points enter the permutation estimate of :func:`chance_probability` (O(rows x N))
+_CHANCE_ROWS = 2000
+
+
+def chance_probability(H: np.ndarray, src: np.ndarray, dst: np.ndarray, threshold: float,
+                       area: float | None = None) -> float:
+    """Chance that an unrelated match is an inlier of ``H``: the larger of two null models.
+
+    - uniform: the destination point falls anywhere in ``area`` (px^2; default the bounding box of ``dst``), so
+      ``p = pi threshold^2 / area``;
+    - permutation: the pairing is random, the points are the observed ones, so ``p`` is the fraction of pairs
+      ``(src_i, dst_j)``, ``i != j``, within ``threshold`` under ``H``. It accounts for clustered keypoints and
+      for strongly perspective models that squeeze many sources into the densest part of ``dst`` (how chance
+      models of unrelated photos collect their "inliers").
+    """
+    s = np.ascontiguousarray(src, np.float64)
+    d = np.ascontiguousarray(dst, np.float64)
+    n = len(s)
+    a = points_area(d) if area is None else float(area)
+    p_uniform = min(1.0, math.pi * float(threshold) ** 2 / max(a, 1.0))
+    if n < 2:
+        return p_uniform
+    rows = np.arange(n, dtype=np.int64)
+    if n > _CHANCE_ROWS:  # evenly spread rows: deterministic and unbiased for the caller's order
+        rows = np.linspace(0, n - 1, _CHANCE_ROWS).round().astype(np.int64)
+    hits = _chance_hits(s, d, np.ascontiguousarray(H, np.float64), float(threshold) ** 2, rows)
+    return max(p_uniform, hits / (len(rows) * (n - 1.0)))
+
+
+def _distinct(pts: np.ndarray) -> int:
+    """Number of distinct rows of an (N, 2) point array."""
+    return int(len(np.unique(pts, axis=0))) if len(pts) else 0
+
+
+def points_area(pts: np.ndarray) -> float:
+    """Area in px^2 of the axis-aligned bounding box of ``pts`` (N, 2), at least 1 px on each side."""
+    span = np.ptp(np.asarray(pts, np.float64), axis=0) + 1.0
+    return float(span[0] * span[1])
+
+
+def _check_area(area) -> None:
+    if area is not None and not (isinstance(area, (int, float, np.integer, np.floating)) and math.isfinite(area)
+                                 and area > 0):
+        raise InputError(f"`area` must be a finite number of px^2 > 0, got {area!r}")
+
+
+def _significant(fit: HomographyFit, src: np.ndarray, dst: np.ndarray, threshold: float,
+                 area: float | None) -> HomographyFit:
+    """:func:`check_significant` for more than 4 correspondences (a minimal set is fitted exactly: nothing to test)."""
+    if len(dst) <= 4:
+        return fit
+    return check_significant(fit, src, dst, threshold, area)
+
+
+def check_significant(fit: HomographyFit, src, dst, threshold: float, area: float | None = None) -> HomographyFit:
+    """``fit`` with its ``log10_nfa`` filled in, or :class:`EstimationError` when its inliers are chance-level.
+
+    Parameters
+    ----------
+    fit : HomographyFit
+        A model estimated from ``src`` -> ``dst``.
+    src, dst : (N, 2) array_like
+        The putative matches it was estimated from.
+    threshold : float
+        The inlier threshold in pixels.
+    area : float, optional
+        Destination image area in px^2 (see :func:`chance_probability`).
+
+    Raises
+    ------
+    EstimationError
+        ``NFA >= MAX_NFA``: as many inliers are expected from unrelated matches; the message has the counts.
+    """
+    s, d = _as_points("src", src), _as_points("dst", dst)
+    inl = np.asarray(fit.inliers, bool)
+    # evidence counts distinct points: many matches to one keypoint (or SIFT's copies of a keypoint with several
+    # orientations) are one observation, and a model that squeezes a row of sources onto one point gains nothing
+    k = min(_distinct(s[inl]), _distinct(d[inl]))
+    n = min(_distinct(s), _distinct(d))
+    p = chance_probability(fit.H, s, d, threshold, area)
+    lnfa = log10_nfa(k, n, p)
+    if not lnfa < math.log10(MAX_NFA):
+        raise EstimationError(
+            f"the best homography has {k} distinct inliers of {n} distinct matches ({fit.num_inliers} of {len(s)} "
+            f"in all) within {float(threshold):g} px, which is chance "
+            f"level (an unrelated match is an inlier with probability {p:.2g}; NFA 10^{lnfa:.1f} >= {MAX_NFA:g}): "
+            "the images do not seem to show the same plane; check that they overlap, or try another --detector "
+            "or more features"
+        )
+    return HomographyFit(H=fit.H, inliers=fit.inliers, iterations=fit.iterations, rms=fit.rms, log10_nfa=lnfa)
+
+
 # ----------------------------------------------------------------------------------------------- public API
 
 
@@ -1074,6 +1234,7 @@ def find_homography(
     refine: bool = True,
     lo_multiplier: float = 3.0,
     lo_steps: int = 4,
+    area: float | None = None,
 ) -> HomographyFit:
     """Robust homography from putative correspondences (LO-RANSAC + Levenberg-Marquardt), like cv2.findHomography.
 
@@ -1095,6 +1256,10 @@ def find_homography(
         Finish with iteratively reweighted Levenberg-Marquardt (Tukey weights) on the reprojection error.
     lo_multiplier, lo_steps : float, int
         The LO threshold shrinks from ``lo_multiplier * threshold`` to ``threshold`` in ``lo_steps`` refits.
+    area : float, optional
+        Area of the destination image in px^2 for the test against chance (:func:`log10_nfa`); default the bounding
+        box of ``dst`` (stricter). With more than 4 correspondences a model whose inlier count is chance-level is
+        refused; 4 correspondences are fitted exactly and cannot be tested.
 
     Returns
     -------
@@ -1106,10 +1271,11 @@ def find_homography(
     InputError (a ValueError)
         Shapes differ or are not (N, 2), fewer than 4 correspondences, NaN/inf, parameters out of range.
     EstimationError
-        All points collinear, every sample degenerate, or no model with at least 4 inliers; raise ``threshold`` or
-        ``max_iters``, or supply better matches.
+        All points collinear, every sample degenerate, no model with at least 4 inliers, or an inlier count that
+        chance explains (NFA >= 1); raise ``threshold`` or ``max_iters``, or supply better matches.
     """
     s, d = _check_pair(src, dst)
+    _check_area(area)
     if not (isinstance(threshold, (int, float, np.floating, np.integer)) and math.isfinite(threshold)
             and threshold > 0):
         raise InputError(f"`threshold` must be a finite number > 0 pixels, got {threshold!r}")
@@ -1175,7 +1341,8 @@ def find_homography(
     inl = mask.copy()
     H.setflags(write=False)
     inl.setflags(write=False)
-    return HomographyFit(H=H, inliers=inl, iterations=iterations, rms=rms)
+    fit = HomographyFit(H=H, inliers=inl, iterations=iterations, rms=rms)
+    return _significant(fit, s, d, threshold, area)
 
 
 # ----------------------------------------------------------------------------------- matches and pictures
@@ -1471,10 +1638,11 @@ def quality_plots(compared: dict) -> dict[str, list[dict]]:
 
 
 def _opencv(method_flag_name: str) -> Callable[..., HomographyFit]:
-    def estimate(src, dst, threshold=3.0, confidence=0.999, max_iters=DEFAULT_MAX_ITERS, rng=None):
+    def estimate(src, dst, threshold=3.0, confidence=0.999, max_iters=DEFAULT_MAX_ITERS, rng=None, area=None):
         import cv2
 
         s, d = _check_pair(src, dst)
+        _check_area(area)
         if not (math.isfinite(threshold) and threshold > 0):
             raise InputError(f"`threshold` must be a finite number > 0 pixels, got {threshold!r}")
         # ``rng`` is accepted for the common signature and ignored: cv2.findHomography's RANSAC and USAC samplers
@@ -1488,8 +1656,11 @@ def _opencv(method_flag_name: str) -> Callable[..., HomographyFit]:
         inl = mask.ravel().astype(bool)
         H = _unit_h22(np.asarray(H, dtype=np.float64))
         e2 = _sq_errors(s, d, H, np.empty(len(s)))
-        rms = float(np.sqrt(e2[inl].mean())) if inl.any() else float("nan")
-        return HomographyFit(H=H, inliers=inl, iterations=-1, rms=rms)
+        if inl.sum() < 4:
+            raise EstimationError(f"cv2.findHomography ({method_flag_name}) found no homography with at least 4 "
+                                  "inliers; raise `threshold` or supply better matches")
+        rms = float(np.sqrt(e2[inl].mean()))
+        return _significant(HomographyFit(H=H, inliers=inl, iterations=-1, rms=rms), s, d, threshold, area)
 
     estimate.__name__ = f"opencv_{method_flag_name.lower()}"
     estimate.__doc__ = (f"``cv2.findHomography`` with ``cv2.{method_flag_name}`` behind the find_homography interface "
@@ -1507,9 +1678,19 @@ METHODS: dict[str, Callable[..., HomographyFit]] = {
 
 
 def estimate(method: str, src, dst, **kwargs) -> HomographyFit:
-    """Run the estimator registered as ``method`` in :data:`METHODS` (keyword arguments as find_homography)."""
+    """Run the estimator registered as ``method`` in :data:`METHODS` (keyword arguments as find_homography).
+
+    This is the path of the ``cvpipe homography`` command and the pipeline's estimate stage: every method's model
+    must be significant against chance (:func:`check_significant`, with ``area`` or the bounding box of ``dst``),
+    and 4 matches, which any homography fits exactly, are not enough to tell (EstimationError).
+    """
     try:
         fn = METHODS[method]
     except KeyError:
         raise InputError(f"`method` must be one of {sorted(METHODS)}, got {method!r}") from None
-    return fn(src, dst, **kwargs)
+    fit = fn(src, dst, **kwargs)
+    n = len(fit.inliers)
+    if n <= 4:
+        raise EstimationError(f"only {n} matches: a homography fits any 4 exactly, so this one cannot be told "
+                              "from chance; supply more matches (more features, a larger ratio)")
+    return fit

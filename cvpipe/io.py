@@ -39,9 +39,12 @@ def _header_size(path: Path, data: bytes) -> tuple[int, int] | None:
     Image.MAX_IMAGE_PIXELS = None  # our own limit applies, with our own message
     try:
         import io as _io
+        import warnings
 
-        with Image.open(_io.BytesIO(data)) as im:
-            return im.size
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # Pillow's complaints about corrupt metadata: our own checks follow
+            with Image.open(_io.BytesIO(data)) as im:
+                return im.size
     except Exception:
         return None
 
@@ -225,7 +228,8 @@ def check_output_path(path: str | os.PathLike, what: str = "output", suffixes: I
         allowed = tuple(suffixes)
         if dest.suffix.lower() not in allowed:
             got = dest.suffix or "no suffix"
-            raise InputError(f"{dest}: {what} must end in one of {', '.join(allowed)}, got {got}", file=str(dest))
+            one = allowed[0] if len(allowed) == 1 else f"one of {', '.join(allowed)}"
+            raise InputError(f"{what} must end in {one}, got {dest} ({got})", file=str(dest))
     parent = dest.parent
     while not parent.exists() and parent != parent.parent:
         parent = parent.parent
@@ -283,21 +287,21 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     if parent not in _SWEPT:
         remove_stale_temporaries(parent)
         _SWEPT.add(parent)
-    while True:
-        tmp_path = dest.parent / f".{dest.stem}{TMP_MARKER}{os.getpid()}-{secrets.token_hex(4)}{dest.suffix}"
-        try:
-            fd = os.open(tmp_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-        except FileExistsError:
-            continue
-        os.close(fd)
-        break
+    tmp_path = None
     try:
+        while tmp_path is None:
+            candidate = dest.parent / f".{dest.stem}{TMP_MARKER}{os.getpid()}-{secrets.token_hex(4)}{dest.suffix}"
+            try:
+                os.close(os.open(candidate, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+            except FileExistsError:
+                continue
+            tmp_path = candidate
         yield tmp_path
         os.replace(tmp_path, dest)
     finally:
-        with contextlib.suppress(OSError):
-            if tmp_path.exists():
-                tmp_path.unlink()
+        if tmp_path is not None:
+            with contextlib.suppress(OSError):
+                tmp_path.unlink(missing_ok=True)
 
 
 def save_image(path: str | os.PathLike, img: np.ndarray, jpeg_quality: int = 95) -> None:

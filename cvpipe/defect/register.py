@@ -219,6 +219,8 @@ def _feature_homography(reference, probe, p, fp, mp, fr, fq, matches) -> tuple[n
         # numerical failure inside the estimator on degenerate match sets: same meaning as its EstimationError
         raise EstimationError(f"registration failed: the homography estimate from {len(matches)} matches broke "
                               f"down numerically ({type(exc).__name__})") from exc
+    except EstimationError as exc:  # e.g. a chance-level model (cvpipe.homography.check_significant)
+        raise EstimationError(f"registration failed: {exc}") from exc
     n_in = int(np.count_nonzero(fit.inliers))
     if n_in < p.min_inliers or n_in < p.min_inlier_ratio * len(matches):
         raise EstimationError(

@@ -1,0 +1,390 @@
+"""Regression tests of issue 17 (hardening): each runs the command or the stage and checks the exit status, the one
+stderr line, the JSON record and the files left behind."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import stat
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from cvpipe import cli, errors, homography, hough, io
+from cvpipe.params import StereoSgmParams
+
+sys.path.insert(0, str(Path(__file__).parent))
+from sweep_inputs import texture  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = dict(os.environ, PYTHONPATH=str(ROOT))
+
+
+def run_main(capsys, argv):
+    """(exit status, stderr lines, stdout JSON) of an in-process run."""
+    code = cli.main([str(a) for a in argv])
+    cap = capsys.readouterr()
+    lines = [ln for ln in cap.err.splitlines() if ln.strip()]
+    return code, lines, json.loads(cap.out) if cap.out.strip() else None
+
+
+def only_error_line(lines):
+    assert len(lines) == 1 and lines[0].startswith("cvpipe: error:"), lines
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def views(tmp_path_factory):
+    root = tmp_path_factory.mktemp("views")
+    t = texture(240, 440, seed=1)
+    paths = {}
+    for name, img in {"a": t[:, :320], "b": t[:, 100:420], "r": t[:, 8:328]}.items():
+        paths[name] = root / f"{name}.png"
+        cv2.imwrite(str(paths[name]), img)
+    return paths
+
+
+def no_temporaries(folder: Path) -> bool:
+    return not [p for p in folder.rglob("*") if ".cvpipe-tmp-" in p.name or ".tmp" in p.name]
+
+
+# ------------------------------------------------------------------------------ item 6: JSON and error lines
+
+
+def test_inspect_missing_probe_exit_2_path_once(capsys, views, tmp_path):
+    code, lines, doc = run_main(capsys, ["inspect", views["a"], tmp_path / "nope.png", "--json"])
+    line = only_error_line(lines)
+    assert code == 2 and line.count("nope.png") == 1 and "no such file" in line
+    assert doc["exit"] == 2 and doc["file"].endswith("nope.png") and doc["error"].count("nope.png") == 1
+
+
+def test_inspect_missing_probe_without_json_is_one_line(capsys, views, tmp_path):
+    code, lines, doc = run_main(capsys, ["inspect", views["a"], tmp_path / "nope.png"])
+    assert code == 2 and doc is None
+    only_error_line(lines)
+
+
+def test_inspect_blank_reference_is_blamed_on_the_reference(capsys, views, tmp_path):
+    blank = tmp_path / "blank_ref.png"
+    cv2.imwrite(str(blank), np.full((240, 320), 128, np.uint8))
+    code, lines, doc = run_main(capsys, ["inspect", blank, views["a"], "--json"])
+    line = only_error_line(lines)
+    assert code == 2 and "blank_ref.png" in line and "reference is blank" in line
+    assert doc == {"error": doc["error"], "file": str(blank), "exit": 2}
+
+
+def test_inspect_missing_reference_still_prints_a_json_record(capsys, views, tmp_path):
+    code, lines, doc = run_main(capsys, ["inspect", tmp_path / "ref.png", views["a"], "--json"])
+    only_error_line(lines)
+    assert code == 2 and set(doc) == {"error", "file", "exit"} and doc["file"].endswith("ref.png")
+
+
+def test_inspect_equal_file_names_from_different_folders_get_distinct_pictures(capsys, views, tmp_path):
+    for sub in ("x", "y"):
+        (tmp_path / sub).mkdir()
+        cv2.imwrite(str(tmp_path / sub / "probe.png"), cv2.imread(str(views["a"])))
+    out = tmp_path / "ov"
+    code, lines, doc = run_main(capsys, ["inspect", views["a"], tmp_path / "x" / "probe.png",
+                                         tmp_path / "y" / "probe.png", "--out", out, "--json"])
+    assert code == 0 and not [ln for ln in lines if ln.startswith("cvpipe: error:")] and len(doc) == 2
+    # two records, two sets of pictures: nothing overwritten
+    assert sorted(p.name for p in out.glob("*.png")) == ["x_probe_diff.png", "x_probe_regions.png",
+                                                         "y_probe_diff.png", "y_probe_regions.png"]
+
+
+@pytest.mark.parametrize("argv", [
+    ["hough", "{missing}", "--json"],
+    ["homography", "{missing}", "{a}", "--json"],
+    ["stereo", "{missing}", "{a}", "--max-disp", "16", "-o", "{tmp}/d.npy", "--json"],
+    ["stitch", "{missing}", "{a}", "-o", "{tmp}/p.png", "--json"],
+    ["hough", "{a}", "--theta-deg", "-1", "--json"],
+    ["hough", "{a}", "--no-such-option", "--json"],
+])
+def test_every_failure_prints_one_json_record(capsys, views, tmp_path, argv):
+    argv = [a.format(missing=tmp_path / "missing.png", a=views["a"], tmp=tmp_path) for a in argv]
+    code, lines, doc = run_main(capsys, argv)
+    only_error_line(lines)
+    assert code == 2 and set(doc) == {"error", "file", "exit"} and doc["exit"] == 2
+    assert doc["error"] == lines[0].removeprefix("cvpipe: error: ")
+
+
+def test_output_path_that_is_a_folder_names_no_temporary(capsys, views, tmp_path):
+    folder = tmp_path / "d.npy"
+    folder.mkdir()
+    code, lines, doc = run_main(capsys, ["stereo", views["a"], views["r"], "--max-disp", "16", "-o", folder, "--json"])
+    line = only_error_line(lines)
+    assert code == 2 and "is a folder" in line and "tmp" not in line.replace(str(tmp_path), "")
+    assert doc["file"] == str(folder) and list(folder.iterdir()) == []
+
+
+def test_unexpected_exception_is_one_line_exit_1(capsys, monkeypatch, views):
+    monkeypatch.setattr(hough, "canny_edges", lambda *a, **k: 1 / 0)
+    code, lines, doc = run_main(capsys, ["hough", views["a"], "--json"])
+    assert code == 1 and "ZeroDivisionError" in only_error_line(lines) and doc["exit"] == 1
+
+
+# ----------------------------------------------------------------------------------------- item 7: Ctrl-C
+
+
+def test_keyboard_interrupt_wrapped_by_numba_is_exit_130(capsys, monkeypatch, views):
+    def parallel_kernel(*a, **k):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:  # what numba's parallel launcher turns a Ctrl-C into
+            raise SystemError("<built-in function ...> returned a result with an exception set") from exc
+
+    monkeypatch.setattr(hough, "canny_edges", parallel_kernel)
+    code, lines, doc = run_main(capsys, ["hough", views["a"], "--json"])
+    assert code == 130 and only_error_line(lines) == "cvpipe: error: interrupted"
+    assert doc == {"error": "interrupted", "file": None, "exit": 130}
+
+
+def test_ctrl_c_swallowed_in_a_c_callback_is_delivered_again():
+    """numba runs Python callbacks from C (its cache notifier); a Ctrl-C raised there would be printed and lost."""
+    seen = []
+    hook = cli._unraisable(seen.append)
+    info = type("Info", (), {"exc_type": KeyboardInterrupt})()
+    with pytest.raises(KeyboardInterrupt):  # the signal is raised again, so Python delivers it at the next check
+        hook(info)
+    other = type("Info", (), {"exc_type": ValueError})()
+    hook(other)
+    assert seen == [other]  # anything else goes to the previous hook
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("when", ["start-up", "parallel kernels"])
+def test_ctrl_c_during_parallel_stereo(tmp_path, when):
+    """A real SIGINT during start-up (imports, numba's cache load) or while numba's parallel SGM runs: exit 130,
+    one line, no traceback, no temporary."""
+    t = texture(600, 1100, seed=3)
+    left, right = tmp_path / "l.png", tmp_path / "r.png"
+    cv2.imwrite(str(left), t[:, :1000])
+    cv2.imwrite(str(right), t[:, 20:1020])
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "cvpipe.cli", "stereo", str(left), str(right), "--max-disp", "128",
+                             "-o", str(out / "d.npy"), "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=dict(ENV, NUMBA_NUM_THREADS="2"))
+    base, t0 = None, time.monotonic()
+    while proc.poll() is None and time.monotonic() - t0 < 300:
+        n = len(os.listdir(f"/proc/{proc.pid}/task"))
+        base = n if base is None else base
+        if when == "start-up" and time.monotonic() - t0 > 1.5:
+            break
+        # numba's 2 workers start last (1 thread at start, 7 in the kernels on the 2-core machine)
+        if when == "parallel kernels" and n >= base + 6:
+            time.sleep(0.3)
+            break
+        time.sleep(0.05)
+    if proc.poll() is not None:
+        pytest.skip("the run finished before it could be interrupted")
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=300)
+    assert proc.returncode == 130, stderr
+    assert stderr.strip() == "cvpipe: error: interrupted"
+    assert json.loads(stdout) == {"error": "interrupted", "file": None, "exit": 130}
+    assert not out.exists() or no_temporaries(out)
+
+
+# ------------------------------------------------------------------------------- items 7, 8: io temporaries
+
+
+def test_outputs_honour_the_umask(tmp_path, capsys, views):
+    img = np.zeros((16, 16, 3), np.uint8)
+    for mask, mode in ((0o022, 0o644), (0o077, 0o600), (0o002, 0o664)):
+        old = os.umask(mask)
+        try:
+            io.save_image(tmp_path / f"m{mask:o}.png", img)
+            io.save_json(tmp_path / f"m{mask:o}.json", {"a": 1})
+        finally:
+            os.umask(old)
+        assert stat.S_IMODE((tmp_path / f"m{mask:o}.png").stat().st_mode) == mode
+        assert stat.S_IMODE((tmp_path / f"m{mask:o}.json").stat().st_mode) == mode
+    old = os.umask(0o022)
+    try:
+        code, _, _ = run_main(capsys, ["stereo", views["a"], views["r"], "--max-disp", "16", "-o",
+                                       tmp_path / "o" / "d.npy", "--json"])
+    finally:
+        os.umask(old)
+    assert code == 0 and stat.S_IMODE((tmp_path / "o" / "d.npy").stat().st_mode) == 0o644
+
+
+def test_temporary_removed_on_keyboard_interrupt(tmp_path):
+    with pytest.raises(KeyboardInterrupt):
+        with io.atomic_path(tmp_path / "out.npy") as tmp:
+            assert ".cvpipe-tmp-" in tmp.name and tmp.name.startswith(".out")
+            tmp.write_bytes(b"half")
+            raise KeyboardInterrupt
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_stale_temporary_of_a_dead_process_is_removed_at_the_next_write(tmp_path, capsys, views):
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()  # a pid that no longer runs
+    out = tmp_path / "o"
+    out.mkdir()
+    stale = out / f".d{io.TMP_MARKER}{dead.pid}-0123abcd.npy"
+    alive = out / f".d{io.TMP_MARKER}{os.getpid()}-0123abcd.npy"  # a concurrent writer's: must stay
+    foreign = out / ".d.abc.tmp.npy"  # not ours: must stay
+    for p in (stale, alive, foreign):
+        p.write_bytes(b"x" * 100)
+    io._SWEPT.discard(out.resolve())
+    code, _, _ = run_main(capsys, ["stereo", views["a"], views["r"], "--max-disp", "16", "-o", out / "d.npy"])
+    assert code == 0
+    assert sorted(p.name for p in out.iterdir()) == sorted(["d.npy", alive.name, foreign.name])
+
+
+# ------------------------------------------------------------------------------------------ item 4: names
+
+
+@pytest.mark.parametrize("name", ["../../../../../tmp/x", "/etc/passwd", "a/b", "a\\b", "..", ".", "", "x\0y"])
+def test_safe_name_refuses_paths(name):
+    with pytest.raises(errors.InputError, match="pair name"):
+        io.safe_name(name, "pair name")
+
+
+def test_safe_name_keeps_plain_names():
+    assert io.safe_name("0_astronaut", "pair name") == "0_astronaut"
+    assert io.safe_name("probe_01.png", "probe") == "probe_01.png"
+
+
+def test_pair_names_come_from_file_names_so_truth_cannot_redirect_outputs(tmp_path):
+    """A truth.json ``name`` of ``../../x`` names no pair: the pairs are named after files and folders
+    (cvpipe.datasets), and a truth entry only adds ground truth to a pair of that name."""
+    from cvpipe import datasets
+
+    t = texture(120, 200, seed=4)
+    for name in ("p_a.png", "p_b.png"):
+        cv2.imwrite(str(tmp_path / name), t[:, :160])
+    (tmp_path / "truth.json").write_text(json.dumps({"pairs": [
+        {"name": "../../../../../tmp/x", "a": "p_a.png", "b": "p_b.png", "H": np.eye(3).tolist()}]}))
+    try:
+        pairs, _ = datasets.find_homography(tmp_path)
+    except errors.InputError as exc:  # refusing the truth file is as good
+        assert "../../../../../tmp/x" in str(exc) or "truth" in str(exc)
+        return
+    for p in pairs:
+        assert io.safe_name(p.name, "pair name") == p.name
+
+
+# --------------------------------------------------------------------------------- item 5: output suffixes
+
+
+@pytest.mark.parametrize("out", ["p.txt", "pano"])
+def test_stitch_checks_the_output_before_stitching(capsys, monkeypatch, views, tmp_path, out):
+    import cvpipe.panorama
+
+    monkeypatch.setattr(cvpipe.panorama, "stitch", lambda *a, **k: pytest.fail("stitched before checking -o"))
+    code, lines, doc = run_main(capsys, ["stitch", views["a"], views["b"], "-o", tmp_path / out, "--json"])
+    line = only_error_line(lines)
+    assert code == 2 and "`-o` must end in one of .png" in line and doc["exit"] == 2
+    assert list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------------------------------- items 1, 7, 9: memory etc.
+
+
+@pytest.mark.parametrize("option", [["--theta-deg", "0.0001"], ["--rho", "0.0001"]])
+def test_hough_tiny_steps_refused_before_allocating(capsys, monkeypatch, views, option):
+    monkeypatch.setattr(hough, "hough_accumulator", lambda *a, **k: pytest.fail("accumulator allocated"))
+    monkeypatch.setattr(hough, "_grid", lambda *a, **k: pytest.fail("tables allocated"))
+    code, lines, doc = run_main(capsys, ["hough", views["a"], *option, "--json"])
+    line = only_error_line(lines)
+    assert code == 2 and "--theta-deg" in line and "--rho" in line and "memory budget" in line
+    assert doc["exit"] == 2
+
+
+def test_stereo_over_budget_names_max_disp(capsys, monkeypatch, views, tmp_path):
+    # 320 x 240 x 16 disparities x 5 bytes = 6.1 MB of volumes > a 1 MB budget
+    monkeypatch.setenv("CVPIPE_MEMORY_BUDGET_GB", "0.001")
+    code, lines, doc = run_main(capsys, ["stereo", views["a"], views["r"], "--max-disp", "16", "-o",
+                                         tmp_path / "d.npy", "--json"])
+    line = only_error_line(lines)
+    assert code == 2 and "`--max-disp`" in line and "downscale" in line and not (tmp_path / "d.npy").exists()
+
+
+def test_bad_memory_budget_variable_is_refused(capsys, monkeypatch, views):
+    monkeypatch.setenv("CVPIPE_MEMORY_BUDGET_GB", "lots")
+    code, lines, _ = run_main(capsys, ["hough", views["a"]])
+    assert code == 2 and "CVPIPE_MEMORY_BUDGET_GB" in only_error_line(lines)
+
+
+def test_huge_image_detection_is_downscaled_and_says_so(monkeypatch, textured_image):
+    from cvpipe import features
+
+    full = features.detect(textured_image, "sift", 500)
+    monkeypatch.setenv("CVPIPE_MEMORY_BUDGET_GB", str(640 * 480 * 250 / 4 / 1e9))  # a quarter of what SIFT needs
+    with pytest.warns(errors.BudgetWarning, match=r"detected at 0\.\d+x size"):
+        small = features.detect(textured_image, "sift", 500)
+    # positions stay in the original pixels: the strongest keypoints of both runs lie in the same image area
+    assert len(small) > 50
+    assert small.xy[:, 0].max() > 0.8 * textured_image.shape[1] and small.xy[:, 1].max() > 0.8 * full.xy[:, 1].max()
+
+
+def test_stereo_paths_6_refused_by_the_parameters():
+    with pytest.raises(ValueError, match=r"`paths` must be one of \[4, 8\], got 6"):
+        StereoSgmParams(paths=6)
+    assert StereoSgmParams(paths=4).paths == 4
+
+
+def test_stereo_reads_16_bit_like_8_bit(capsys, views, tmp_path):
+    for k in ("a", "r"):
+        cv2.imwrite(str(tmp_path / f"{k}16.png"), cv2.imread(str(views[k])).astype(np.uint16) * 257)
+    outs = {}
+    for tag, (l, r) in {"8": (views["a"], views["r"]), "16": (tmp_path / "a16.png", tmp_path / "r16.png")}.items():
+        code, lines, _ = run_main(capsys, ["stereo", l, r, "--max-disp", "16", "-o", tmp_path / f"d{tag}.npy"])
+        assert code == 0 and not [ln for ln in lines if ln.startswith("cvpipe: error:")]
+        outs[tag] = np.load(tmp_path / f"d{tag}.npy", allow_pickle=False)
+    # x * 257 / 257 restores every 8-bit value exactly, so the disparities are identical
+    assert np.array_equal(outs["8"], outs["16"], equal_nan=True)
+
+
+# ------------------------------------------------------------------------------- item 2: chance-level models
+
+
+def test_uniformly_random_matches_give_no_model():
+    rng = np.random.default_rng(7)
+    refused = 0
+    for trial in range(20):
+        src = rng.uniform(0, [640, 480], (60, 2))
+        dst = rng.uniform(0, [640, 480], (60, 2))
+        for method in homography.METHODS:
+            try:
+                homography.estimate(method, src, dst, threshold=3.0, rng=trial)
+            except errors.EstimationError as exc:
+                assert "chance level" in str(exc) or "no homography" in str(exc)
+                refused += 1
+    assert refused == 20 * len(homography.METHODS)  # no model from pure chance, whatever the method
+
+
+def test_real_model_with_outliers_is_kept_and_significant():
+    rng = np.random.default_rng(3)
+    H = np.array([[1.1, 0.05, 12.0], [-0.03, 0.95, 7.0], [1e-4, -5e-5, 1.0]])
+    src = rng.uniform(0, [640, 480], (80, 2))
+    dst = homography.transform_points(H, src) + rng.normal(0, 0.5, (80, 2))
+    dst[:60] = rng.uniform(0, [640, 480], (60, 2))  # 75 % outliers, 20 true matches
+    for method in homography.METHODS:
+        fit = homography.estimate(method, src, dst, threshold=3.0, rng=0)
+        assert fit.num_inliers >= 18 and fit.log10_nfa < -5  # 20 true matches are far beyond chance
+
+
+def test_four_matches_cannot_be_told_from_chance_on_the_cli_path():
+    src = np.array([[0, 0], [100, 0], [100, 100], [0, 100]], float)
+    with pytest.raises(errors.EstimationError, match="fits any 4 exactly"):
+        homography.estimate("ours", src, src + 5)
+    assert homography.find_homography(src, src + 5).num_inliers == 4  # the function keeps cv2's semantics
+
+
+def test_homography_command_on_unrelated_images_is_exit_1_with_counts(capsys, tmp_path):
+    for seed in (11, 12):
+        cv2.imwrite(str(tmp_path / f"{seed}.png"), texture(480, 640, seed=seed))
+    for method in ("ours", "opencv-ransac", "opencv-magsac"):
+        code, lines, doc = run_main(capsys, ["homography", tmp_path / "11.png", tmp_path / "12.png", "--method",
+                                             method, "--json"])
+        line = only_error_line(lines)
+        assert code == 1 and doc["exit"] == 1 and ("chance level" in line or "matches" in line), line
