@@ -649,7 +649,7 @@ class StereoRectifyParams:
     margin: float = 1.0
     seed: int = 0
     rectified_max_dy: float = 1.0
-    rectified_share: float = 0.9
+    rectified_share: float = 0.75
 
     def __post_init__(self):
         _in_range("max_features", self.max_features, 1, 1_000_000)

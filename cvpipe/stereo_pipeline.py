@@ -59,9 +59,19 @@ def _vertical(record: dict, dy: np.ndarray, over: str) -> None:
     record["vertical_error_over"] = f"{len(dy)} {over}"
 
 
+def feature_matches(left: np.ndarray, right: np.ndarray, detector: str = "sift", max_features: int = 4000,
+                    ratio: float = 0.8, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Putative matches left -> right (:func:`cvpipe.homography.correspondences`), the same on every run: FLANN's
+    randomized KD-trees draw from OpenCV's global generator, which is seeded with ``seed`` first."""
+    from .homography import correspondences
+
+    cv2.setRNGSeed(int(seed))
+    return correspondences(io.to_gray(left), io.to_gray(right), detector, max_features, ratio)
+
+
 def rectify_pair(left: np.ndarray, right: np.ndarray, pts1: np.ndarray, pts2: np.ndarray,
                  calib: rectify.Calibration | None, *, threshold: float = 1.0, margin: float = 1.0, seed: int = 0,
-                 rectified_max_dy: float = 1.0, rectified_share: float = 0.9) -> RectifiedPair:
+                 rectified_max_dy: float = 1.0, rectified_share: float = 0.75) -> RectifiedPair:
     """Rectify one pair the way the pipeline does.
 
     The rule: a calibration that holds the rig's pose (an OpenCV stereo file: K1 D1 K2 D2 R T) gives a calibrated

@@ -9,7 +9,6 @@ from pathlib import Path
 
 from cvpipe import datasets, io, rectify, stereo_pipeline
 from cvpipe.errors import EstimationError, InputError
-from cvpipe.homography import correspondences
 from stages._runner import Stage, run
 
 
@@ -26,7 +25,7 @@ def stereo_rectify(st: Stage) -> None:
             if pair.calib is not None:
                 calib = rectify.parse_calibration(pair.calib.read_text(encoding="utf-8"), str(pair.calib))
             with st.timer(f"rectify {pair.name}"):
-                p1, p2 = correspondences(io.to_gray(left), io.to_gray(right), p.detector, p.max_features, p.ratio)
+                p1, p2 = stereo_pipeline.feature_matches(left, right, p.detector, p.max_features, p.ratio, p.seed)
                 got = stereo_pipeline.rectify_pair(left, right, p1, p2, calib, threshold=p.threshold,
                                                    margin=p.margin, seed=p.seed, rectified_max_dy=p.rectified_max_dy,
                                                    rectified_share=p.rectified_share)
