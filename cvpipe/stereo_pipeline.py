@@ -122,7 +122,8 @@ def rectify_pair(left: np.ndarray, right: np.ndarray, pts1: np.ndarray, pts2: np
         _vertical(record, rect.vertical_error, "matches within 2 px of one row after rectification")
     elif rectify.looks_rectified(p1, p2, rectified_max_dy, rectified_share):
         record.update(kind="none", H_left=np.eye(3).tolist(), H_right=np.eye(3).tolist(), shift_px=0.0)
-        _vertical(record, np.abs(p1[:, 1] - p2[:, 1]), "matches (all, no rectification)")
+        dy = np.abs(p1[:, 1] - p2[:, 1])
+        _vertical(record, dy[dy <= 2.0], "matches within 2 px of one row (no rectification)")
         record["depth"] = _geometry(None if calib is None else rectify.rectified_depth_geometry(calib))
         return RectifiedPair(left, right, record, p1, p2)
     else:
@@ -162,7 +163,7 @@ def rectify_metrics(records: dict) -> dict:
     summary: dict = {"pairs": len(records), "rectified": sum(r["kind"] != "none" for r in records.values())}
     med = [r["vertical_error_median_px"] for r in records.values() if "vertical_error_median_px" in r]
     if med:
-        summary["vertical_error_median_px"] = float(np.max(med))  # the worst pair
+        summary["vertical_error_median_px_worst"] = float(np.max(med))  # of the worst pair
     return {"stereo": {"rectify": {"all": summary, **per}}}
 
 
@@ -262,9 +263,11 @@ def depth_picture(left: np.ndarray, depth: np.ndarray, unit: str, width: int = 9
 # ------------------------------------------------------------------------------------------------ summary
 
 
-def extend_summary(summary: dict, rect_records: dict, depth_run: dict, pictures: list[dict]) -> dict:
+def extend_summary(summary: dict, rect_records: dict, depth_run: dict, pictures: list[dict],
+                   frame_truth: tuple = ()) -> dict:
     """Add the rectification and depth tables, pictures and wording to the disparity summary of
-    :func:`cvpipe.stereo.report_summary` (a new dict)."""
+    :func:`cvpipe.stereo.report_summary` (a new dict); ``frame_truth`` names the pairs that have a truth.npz (used
+    only when the pair needed no rectification)."""
     def num(v, nd=3):
         return None if v is None else round(float(v), nd)
 
@@ -283,7 +286,12 @@ def extend_summary(summary: dict, rect_records: dict, depth_run: dict, pictures:
         depth_rows.append([name, f"depth in {unit}" + ("" if res["exact"] else " (estimated rectification)"),
                            num(100 * res["valid_fraction"], 2), num(res.get("depth_median"), 1),
                            f"{num(res.get('depth_p5'), 1)} .. {num(res.get('depth_p95'), 1)}", res["points"]])
-    tables = list(summary["tables"])
+    tables = [dict(t) for t in summary["tables"]]
+    elsewhere = {n for n in frame_truth if rect_records.get(n, {}).get("kind", "none") != "none"}
+    for t in tables:  # a truth.npz that exists but is in the original frame is not "no ground truth"
+        if t["title"] == "Per pair":
+            t["rows"] = [[("truth not in the rectified frame" if c == "no ground truth" and row[0] in elsewhere
+                           else c) for c in row] for row in t["rows"]]
     at = next((i for i, t in enumerate(tables) if t["title"] == "Not processed"), len(tables))
     tables[at:at] = [
         {"title": "Rectification (stereo_rectify)",

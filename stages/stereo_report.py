@@ -58,7 +58,8 @@ def stereo_report(st: Stage) -> None:
         pictures.append({"path": path.as_posix(), "caption": f"{pair.name} (max_disp {max_disp}): {what}"})
     dropped = rect_run["dropped"] + stereo.merge_dropped(runs) + depth_run["dropped"]
     summary = stereo.report_summary(runs, pictures, dropped, p.error_clip)
-    io.save_json(a.summary, stereo_pipeline.extend_summary(summary, rects, depth_run, extra))
+    with_truth = tuple(q.name for q in pairs if q.truth is not None)
+    io.save_json(a.summary, stereo_pipeline.extend_summary(summary, rects, depth_run, extra, with_truth))
     for name, rows in stereo.quality_plots(runs).items():
         io.save_json(Path(a.plots) / f"{name}.json", rows)
     io.save_json(Path(a.plots) / "vertical_error.json", stereo_pipeline.vertical_error_plot(rects))

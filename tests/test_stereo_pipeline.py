@@ -162,6 +162,8 @@ def test_report_summary(pipeline):
     assert [r[0] for r in dropped] == ["wall"]
     assert "disparity only for bike" in summary["description"]
     assert "bad-2.0 is reported only for pairs that needed no rectification" in summary["description"]
+    per_pair = next(t for t in summary["tables"] if t["title"] == "Per pair")["rows"]
+    assert all("truth not in the rectified frame" in row for row in per_pair if row[0] == "tilted")
     for pic in summary["pictures"]:
         assert (root / pic["path"]).is_file(), pic
     names = {Path(p["path"]).name for p in summary["pictures"]}
