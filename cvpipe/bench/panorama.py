@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares
 
-from .. import blending, io, panorama, warping
+from .. import io, linalg, panorama
+from ..panorama import warp as warping
 from ..errors import EstimationError, InputError
 from ..metrics import corner_error
 from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
@@ -194,8 +195,8 @@ def run(args: argparse.Namespace) -> int:
     cfg = {"features": feats, "matching": match, "homographies": homs, "warp": warp,
            "blend": PanoramaBlendParams()}
     t0 = time.perf_counter()
-    blending.largest_rectangle(np.ones((4, 4), bool))  # numba: load or compile once, timed on its own
-    panorama._cholesky_solve(np.eye(2), np.ones(2))
+    panorama.largest_rectangle(np.ones((4, 4), bool))  # numba: load or compile once, timed on its own
+    linalg.solve_spd(np.eye(2), np.ones(2))
     compile_seconds = time.perf_counter() - t0
     results = []
     for name in args.sets:
@@ -229,7 +230,7 @@ def run(args: argparse.Namespace) -> int:
                                            warp.compose_megapix)
             w = warping.warp_images(comp.images, comp.G, warp.projection, comp.focal, comp.ref_size,
                                     warp.max_canvas_megapix)
-            row["ghosting"] = blending.overlap_difference(w, blending.gain_compensation(w))
+            row["ghosting"] = panorama.overlap_difference(w, panorama.gain_compensation(w))
             if folder.startswith("adobe"):
                 gt = _gt_pairs(root / folder, files)
                 row.update(_accuracy(ours, gt, sizes), gt_self_consistency=_gt_consistency(gt, sizes),

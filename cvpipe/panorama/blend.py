@@ -1,24 +1,22 @@
-"""Blending warped images into one panorama: gain compensation, seams, multi-band and feather blending, cropping.
+"""Blending warped images into one panorama: gain compensation, then multi-band or feather blending of the seams.
 
 * :func:`gain_compensation`: one gain per image so that overlaps agree in mean intensity, kept near 1 (the
   quadratic objective of Brown & Lowe, 2007, solved as a small linear least-squares problem).
-* :func:`seam_labels`: every canvas pixel goes to the image in which it lies deepest (largest distance to that
-  image's border), which puts the seams halfway through each overlap; :func:`seam_lines` draws them.
 * :func:`blend_multiband`: Laplacian-pyramid blending (Burt & Adelson, 1983) of the seam regions: low frequencies
   blend over wide bands, fine detail over narrow ones, so exposure steps vanish without ghosting.
 * :func:`blend_feather`: weighted average with weights growing with the distance to each image's border.
-* :func:`largest_rectangle`: the largest axis-aligned rectangle with no empty pixel (numba, one pass).
+* :func:`compose`: gains, seams (:mod:`cvpipe.panorama.seams`) and the chosen blender.
 """
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from typing import Callable
 
 import cv2
 import numpy as np
-from numba import njit
 
-from .warping import Warped
+from .seams import _distance, seam_labels, seam_lines
+from .warp import Warped
 
 
 def _overlaps(w: Warped, step: int):
@@ -98,39 +96,6 @@ def overlap_difference(w: Warped, gains: np.ndarray | None = None) -> float:
         total += float(np.abs(np.clip(g[i] * gi, 0, 255) - np.clip(g[j] * gj, 0, 255)).sum())
         count += len(gi)
     return total / count if count else 0.0
-
-
-def _distance(mask: np.ndarray) -> np.ndarray:
-    # pad with zeros so that the box edge counts as the image border
-    d = cv2.distanceTransform(np.pad(mask, 1), cv2.DIST_L2, 3)
-    return d[1:-1, 1:-1]
-
-
-def seam_labels(w: Warped) -> np.ndarray:
-    """(H, W) int16 canvas: index of the image each pixel is taken from, -1 where no image covers it."""
-    W, H = w.size
-    labels = np.full((H, W), -1, np.int16)
-    best = np.zeros((H, W), np.float32)
-    for k, (mask, (x, y)) in enumerate(zip(w.masks, w.corners)):
-        d = _distance(mask)
-        h, ww = mask.shape
-        b = best[y:y + h, x:x + ww]
-        upd = d > b
-        b[upd] = d[upd]
-        labels[y:y + h, x:x + ww][upd] = k
-    return labels
-
-
-def seam_lines(labels: np.ndarray) -> np.ndarray:
-    """(H, W) bool: pixels where the source image changes to another image (4-neighbourhood)."""
-    out = np.zeros(labels.shape, bool)
-    a, b = labels[:, :-1], labels[:, 1:]
-    d = (a != b) & (a >= 0) & (b >= 0)
-    out[:, :-1] |= d
-    a, b = labels[:-1], labels[1:]
-    d = (a != b) & (a >= 0) & (b >= 0)
-    out[:-1] |= d
-    return out
 
 
 def _three(a: np.ndarray) -> np.ndarray:
@@ -269,73 +234,3 @@ def compose(w: Warped, blender: str, bands: int, gain: bool) -> tuple[np.ndarray
     labels = seam_labels(w)
     pano = BLENDERS[blender](w, labels, bands, gains)
     return pano, labels >= 0, seam_lines(labels)
-
-
-@njit(cache=True)
-def _largest_rectangle(mask):
-    H, W = mask.shape
-    heights = np.zeros(W + 1, np.int64)
-    stack = np.zeros(W + 1, np.int64)
-    best, bx, by, bw, bh = 0, 0, 0, 0, 0
-    for r in range(H):
-        for c in range(W):
-            heights[c] = heights[c] + 1 if mask[r, c] else 0
-        top = 0
-        for c in range(W + 1):
-            while top > 0 and heights[stack[top - 1]] >= heights[c]:
-                h = heights[stack[top - 1]]
-                top -= 1
-                left = stack[top - 1] + 1 if top > 0 else 0
-                area = h * (c - left)
-                if area > best:
-                    best, bx, by, bw, bh = area, left, r - h + 1, c - left, h
-            stack[top] = c
-            top += 1
-    return bx, by, bw, bh
-
-
-def largest_rectangle(mask: np.ndarray) -> tuple[int, int, int, int]:
-    """The largest axis-aligned rectangle of non-zero pixels (maximal-histogram method, O(H W)).
-
-    Parameters
-    ----------
-    mask : (H, W) bool or uint8
-
-    Returns
-    -------
-    (x, y, w, h)
-        Top-left pixel and size; ``(0, 0, 0, 0)`` for an empty mask.
-    """
-    mask = np.asarray(mask)
-    if mask.ndim != 2:
-        raise ValueError(f"`mask` must be 2-D, got shape {mask.shape}")
-    return tuple(int(v) for v in _largest_rectangle(np.ascontiguousarray(mask != 0)))
-
-
-def overlay_seams(pano: np.ndarray, seams: np.ndarray, color=(0, 0, 255), width: int = 3) -> np.ndarray:
-    """``pano`` with the seam lines drawn over it (``width`` pixels wide) for the report."""
-    k = np.ones((width, width), np.uint8)
-    thick = cv2.dilate(seams.astype(np.uint8), k) > 0
-    out = pano.copy() if pano.ndim == 3 else cv2.cvtColor(pano, cv2.COLOR_GRAY2BGR)
-    out[thick] = color
-    return out
-
-
-def side_by_side(images: Sequence[np.ndarray | None], height: int, gap: int = 8,
-                 max_width: int = 1200) -> np.ndarray:
-    """Images scaled to one ``height`` and put next to each other (a grey box for a missing one), then shrunk
-    to at most ``max_width`` pixels wide."""
-    tiles = []
-    for img in images:
-        if img is None:
-            tiles.append(np.full((height, height, 3), 64, np.uint8))
-            continue
-        img = img if img.ndim == 3 else cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
-        w = max(1, int(round(img.shape[1] * height / img.shape[0])))
-        tiles.append(cv2.resize(img, (w, height), interpolation=cv2.INTER_AREA))
-        tiles.append(np.full((height, gap, 3), 255, np.uint8))
-    out = np.hstack(tiles[:-1] if images and images[-1] is not None else tiles)
-    if out.shape[1] > max_width:
-        out = cv2.resize(out, (max_width, max(1, int(out.shape[0] * max_width / out.shape[1]))),
-                         interpolation=cv2.INTER_AREA)
-    return out
