@@ -173,7 +173,7 @@ def _two_constant(v0: float, v1: float) -> panorama.warp.Warped:
 @pytest.mark.parametrize("blender", ["multiband", "feather"])
 def test_blending_is_seamless_on_constant_brightness(blender):
     w = _two_constant(137, 137)
-    pano, mask, seams = panorama.compose(w, blender, 5, gain=True)
+    pano, mask, seams = panorama.compose(w, blender, 5, gain="gain")
     assert mask.all() and seams[:, 150:170].any()  # the seam runs through the overlap
     # no step at the seam and no dark halo at the borders: every pixel keeps the constant within rounding
     assert np.abs(pano.astype(int) - 137).max() <= 1
@@ -187,7 +187,7 @@ def test_gain_compensation_equalises_an_exposure_step():
     assert 1.0 < gains[0] < 1.15 and 0.85 < gains[1] < 1.0
     assert abs(gains[0] * 100 - gains[1] * 130) < 10.0
     assert panorama.overlap_difference(w, gains) < 10.0 < 29.0 < panorama.overlap_difference(w)
-    pano, _, _ = panorama.compose(w, "multiband", 5, gain=True)
+    pano, _, _ = panorama.compose(w, "multiband", 5, gain="gain")
     # the remaining step is spread over the blend band: at most 2 grey levels between neighbours
     assert np.abs(np.diff(pano[60, :, 1].astype(int))).max() <= 2
 
@@ -627,3 +627,101 @@ def test_find_panorama_truth_is_optional_per_set_and_image(tmp_path, views):
     io.save_json(tmp_path / "truth.json", {"sets": [{"name": "a", "images": ["v0.jpg"], "H": [[1, 2]]}]})
     with pytest.raises(InputError, match=r"truth.json: field `sets\[0\].H\[0\]` must be"):
         datasets.find_panorama(tmp_path)
+
+
+# ---- exposure compensation kinds (OpenCV's compensators: gain, channels, blocks, channel_blocks) ----
+
+#: per-channel (B, G, R) gain of the second view against the first: a colour cast like exposure_error's sky
+CAST = np.array([1.0, 0.8, 1.2])
+LEFT, RIGHT = (slice(None), slice(0, 80)), (slice(None), slice(220, 300))  # each view alone, away from the seam
+
+
+@pytest.fixture(scope="module")
+def scene() -> np.ndarray:
+    """A 300x160 photo darkened to 60 % (+20) so that no value scaled by ``CAST`` saturates, float64."""
+    return fit(photo("astronaut"), 300, 160).astype(np.float64) * 0.6 + 20
+
+
+def _cast_pair(scene: np.ndarray, gain_of_row=None) -> panorama.Warped:
+    """Two 160x200 crops of ``scene`` overlapping over 100 columns; the second one's channels scaled by ``CAST``
+    (and by ``gain_of_row(y)`` per row when given)."""
+    a, b = scene[:, :200], scene[:, 100:] * CAST
+    if gain_of_row is not None:
+        b = b * gain_of_row(np.arange(160))[:, None, None]
+    full = np.full((160, 200), 255, np.uint8)
+    views = [np.clip(v + 0.5, 0, 255).astype(np.uint8) for v in (a, b)]
+    return panorama.Warped(views, [full, full.copy()], [(0, 0), (100, 0)], (300, 160), (0, 0))
+
+
+def _seam_cast(left: np.ndarray, right: np.ndarray, scene: np.ndarray) -> float:
+    """Colour cast between the two sides of the seam: the largest relative difference of the (B, G, R) shares of the
+    right side's mean colour and the left side's, each first divided by the shares of the same part of ``scene`` (so
+    the scene's own colours cancel). 0 for views that differ by an exposure only, ~0.2 for ``CAST``."""
+    def shares(img, truth):
+        m, t = (x.reshape(-1, 3).astype(np.float64).mean(0) for x in (img, truth))
+        return (m / m.sum()) / (t / t.sum())
+
+    return float(np.abs(shares(right, scene[RIGHT]) / shares(left, scene[LEFT]) - 1).max())
+
+
+def test_channel_gains_recover_a_per_channel_cast(scene):
+    w = _cast_pair(scene)
+    # a negligible prior (sigma_g = 1000) leaves the data term alone: the overlaps' channel means are equalised, so
+    # g_b / g_a per channel = 1 / CAST; 1 % covers the uint8 rounding of the views (0.5 grey level in ~80)
+    g = panorama.compensation_gains(w, "channels", sigma_g=1e3)
+    np.testing.assert_allclose(g[1] / g[0], 1.0 / CAST, rtol=0.01)
+    # the default prior (sigma_g = 0.1) keeps the gains near 1 and moves every channel the right way
+    g = panorama.compensation_gains(w, "channels")
+    assert np.all(np.abs(g - 1) < 0.2) and np.all(np.sign(g[1] / g[0] - 1) == np.sign(1 / CAST - 1))
+    assert panorama.compensation_gains(w, "gain").shape == (2,)  # one grey gain per image cannot remove a cast
+
+
+def test_channel_gains_leave_no_colour_cast_across_the_seam(scene):
+    w = _cast_pair(scene)
+    before = _seam_cast(w.images[0][:, :80], w.images[1][:, 120:], scene)
+    assert before > 0.15  # CAST moves the G and R shares by ~20 %
+    labels = panorama.seam_labels(w)
+    exact = panorama.blend_multiband(w, labels, 5, panorama.compensation_gains(w, "channels", sigma_g=1e3))
+    # fully equalised channels: both sides of the blend show one colour balance, within 3 % (the gains are within
+    # 1 %, see above, and the coarsest pyramid level, 2^5 px, still mixes the views 70 px away from the seam)
+    assert _seam_cast(exact[LEFT], exact[RIGHT], scene) < 0.03
+    # the default prior balances gains near 1 against equal overlap means (Brown & Lowe's sigma_n = 10, sigma_g =
+    # 0.1): at these ~80 grey levels about half of the cast goes (the 2x2 normal equations per channel give
+    # 0.8 -> ~0.9); a single grey gain removes none of it
+    pano, _, _ = panorama.compose(w, "multiband", 5, "channels")
+    grey, _, _ = panorama.compose(w, "multiband", 5, "gain")
+    assert _seam_cast(pano[LEFT], pano[RIGHT], scene) < 0.65 * before
+    assert _seam_cast(grey[LEFT], grey[RIGHT], scene) > 0.9 * before
+
+
+def test_block_gains_follow_an_exposure_that_varies_across_the_image(scene):
+    # the second view also darkens from top (x1.15) to bottom (x0.85): one gain per channel cannot follow that,
+    # a smooth map of gains over 32-pixel blocks can
+    w = _cast_pair(scene, lambda y: 1.15 - 0.3 * y / 159)
+    kw = {"sigma_g": 1e3}
+    channels = panorama.overlap_difference(w, panorama.compensation_gains(w, "channels", **kw))
+    blocks = panorama.overlap_difference(w, panorama.compensation_gains(w, "channel_blocks", 32, **kw))
+    grey_blocks = panorama.overlap_difference(w, panorama.compensation_gains(w, "blocks", 32, **kw))
+    before = panorama.overlap_difference(w)
+    # (the grey-level difference hardly sees the cast itself: G x0.8 and R x1.2 almost cancel in grey)
+    assert blocks < 0.5 * min(channels, before) and grey_blocks < 0.5 * min(channels, before)
+    maps = panorama.compensation_gains(w, "channel_blocks", 32)
+    assert [m.shape for m in maps] == [(160, 200, 3), (160, 200, 3)]
+    # the second view's map rises from top to bottom (it undoes the darkening), smoothly: no jump between pixels
+    # larger than a block's share of the 0.3 ramp
+    col = maps[1][:, 100, 1]
+    assert col[-1] > col[0] and np.abs(np.diff(col)).max() < 0.3 * 32 / 160
+
+
+def test_gain_choices_are_checked():
+    w = _two_constant(100, 120)
+    with pytest.raises(ValueError, match="`gain_compensation` must be one of"):
+        panorama.compensation_gains(w, "rgb")
+    with pytest.raises(ValueError, match="`gain_block` must be an integer >= 4"):
+        panorama.compensation_gains(w, "blocks", 2)
+    with pytest.raises(ValueError, match="`gain_compensation` must be one of"):
+        PanoramaBlendParams(gain_compensation="rgb")
+    with pytest.raises(ValueError, match="`gain_block` must be in"):
+        PanoramaBlendParams(gain_block=2)
+    assert panorama.compensation_gains(w, "none") is None
+    assert panorama.overlap_difference(w, None) == panorama.overlap_difference(w)

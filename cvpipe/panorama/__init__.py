@@ -25,7 +25,8 @@ import numpy as np
 from ..errors import EstimationError, InputError
 from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
                       PanoramaWarpParams)
-from .blend import BLENDERS, blend_feather, blend_multiband, compose, gain_compensation, overlap_difference
+from .blend import (BLENDERS, DEFAULT_GAIN, DEFAULT_GAIN_BLOCK, GAIN_CHOICES, apply_gains, blend_feather,
+                    blend_multiband, compensation_gains, compose, gain_compensation, overlap_difference)
 from .crop import largest_rectangle
 from .features import (detect_all, normalize_det, rescale_homographies, resize, resize_matrix, resized_size,
                        scale_for, working_images)
@@ -36,7 +37,8 @@ from .register import REFINEMENTS, Registration, estimate_focal, maximum_spannin
 from .seams import seam_labels, seam_lines
 from .warp import PROJECTIONS, ComposeInputs, Warped, compose_inputs, warp_images
 
-__all__ = ["BLENDERS", "OPENCV_STATUS", "PROJECTIONS", "REFINEMENTS", "ComposeInputs", "Edge", "MatchGraph",
+__all__ = ["BLENDERS", "DEFAULT_GAIN", "DEFAULT_GAIN_BLOCK", "GAIN_CHOICES", "apply_gains", "compensation_gains",
+           "OPENCV_STATUS", "PROJECTIONS", "REFINEMENTS", "ComposeInputs", "Edge", "MatchGraph",
            "Panorama", "Registration", "Warped", "blend_feather", "blend_multiband", "candidate_pairs", "compose",
            "compose_inputs", "detect_all", "estimate_focal", "gain_compensation", "largest_rectangle",
            "levenberg_marquardt", "match_graph", "maximum_spanning_tree", "nearest_rotation", "normalize_det",
@@ -147,7 +149,8 @@ def stitch(images: Sequence[np.ndarray], features: PanoramaFeaturesParams = Pano
                                  warp.max_canvas_megapix)
     t["warp"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    pano, mask, seams = compose(warped, blend.blender, blend.bands, blend.gain_compensation)
+    pano, mask, seams = compose(warped, blend.blender, blend.bands, blend.gain_compensation,
+                              blend.gain_block)
     t["blend"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     rect = largest_rectangle(mask) if crop else (0, 0, mask.shape[1], mask.shape[0])
