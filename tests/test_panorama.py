@@ -725,3 +725,22 @@ def test_gain_choices_are_checked():
         PanoramaBlendParams(gain_block=2)
     assert panorama.compensation_gains(w, "none") is None
     assert panorama.overlap_difference(w, None) == panorama.overlap_difference(w)
+
+
+def test_bench_seam_colour_difference_separates_brightness_from_cast():
+    from cvpipe.bench import panorama as bench
+
+    labels = np.zeros((100, 400), np.int16)
+    labels[:, 200:] = 1
+    labels[:, :10] = -1  # uncovered border: the sides must stay clear of it
+    left = np.full((100, 200, 3), 120, np.uint8)
+    same = bench.seam_colour_difference(np.hstack([left, left]), labels)
+    assert same["delta_e"] == pytest.approx(0.0, abs=1e-6) and same["rows"] == 25  # the top quarter of the rows
+    # a neutral grey step changes L* only: a clear delta E, no cast (a*, b* of greys are 0 up to float32 rounding)
+    step = bench.seam_colour_difference(np.hstack([left, np.full((100, 200, 3), 160, np.uint8)]), labels)
+    assert step["delta_e"] > 10 and step["delta_ab"] < 0.1
+    # the same brightness with less green on the right: a cast that delta ab shows
+    cast = bench.seam_colour_difference(np.hstack([left, np.full((100, 200, 3), (120, 100, 120), np.uint8)]),
+                                        labels)
+    assert cast["delta_ab"] > 5
+    assert bench.seam_colour_difference(left, np.zeros((100, 200), np.int16)) is None  # no seam

@@ -10,8 +10,6 @@ from __future__ import annotations
 from typing import Sequence
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.spatial.transform import Rotation
 
 from ..errors import EstimationError
 from ..linalg import solve_spd
@@ -69,6 +67,8 @@ def _solve(blocks: list, homs, x0: np.ndarray, columns, T: dict | None = None,
         return np.concatenate([(fwd[:, :2] / fwd[:, 2:] - dst).ravel(), (bwd[:, :2] / bwd[:, 2:] - src).ravel()])
 
     if T is None:
+        from scipy.sparse import coo_matrix  # here: its import costs the command ~0.2 s
+
         # residual rows of edge k: forward 2p, 2p+1 and backward 2n + 2p, 2n + 2p + 1
         rows, cols = [], []
         for k, blk in enumerate(blocks):
@@ -280,6 +280,8 @@ def refine_rotations(G: dict, edges: dict, sizes: Sequence[tuple[int, int]], ref
     focal : float
         Refined focal length in pixels.
     """
+    from scipy.spatial.transform import Rotation  # here: its import costs the command ~0.3 s
+
     rng = np.random.default_rng(rng)
     nodes = [a for a in sorted(G) if a != reference]
     slot = {a: k for k, a in enumerate(nodes)}
