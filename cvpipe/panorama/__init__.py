@@ -126,6 +126,16 @@ def stitch(images: Sequence[np.ndarray], features: PanoramaFeaturesParams = Pano
         Fewer than two images, wrong dtype or shape.
     EstimationError
         No two images overlap, or the projection cannot hold the views (e.g. ``plane`` beyond 180 degrees).
+
+    Examples
+    --------
+    Two overlapping crops of one photo, given right one first:
+
+    >>> from cvpipe.samples import photo
+    >>> img = photo("astronaut")
+    >>> pano = stitch([img[:, 200:], img[:, :320]], rng=0)
+    >>> pano.registration.used, pano.image.shape[1] > 480
+    ((0, 1), True)
     """
     _check_images(images)
     rng = np.random.default_rng(rng)

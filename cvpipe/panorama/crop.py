@@ -18,6 +18,13 @@ def largest_rectangle(mask: np.ndarray) -> tuple[int, int, int, int]:
     -------
     (x, y, w, h)
         Top-left pixel and size; ``(0, 0, 0, 0)`` for an empty mask.
+
+    Examples
+    --------
+    >>> mask = np.ones((4, 6), bool)
+    >>> mask[0, :2] = mask[3, 5] = False
+    >>> largest_rectangle(mask)
+    (0, 1, 5, 3)
     """
     mask = np.asarray(mask)
     if mask.ndim != 2:

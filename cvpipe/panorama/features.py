@@ -21,6 +21,11 @@ def scale_for(size: tuple[int, int], megapix: float) -> float:
     """The factor (<= 1) that brings an image of ``size = (w, h)`` to at most ``megapix`` million pixels.
 
     ``megapix <= 0`` means full resolution (factor 1), as in ``cv2.Stitcher``.
+
+    Examples
+    --------
+    >>> scale_for((2000, 1500), 0.6), scale_for((640, 480), 0.6), scale_for((2000, 1500), -1)
+    (0.4472135954999579, 1.0, 1.0)
     """
     if megapix <= 0:
         return 1.0

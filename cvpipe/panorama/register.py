@@ -68,7 +68,13 @@ class Registration:
 
 
 def maximum_spanning_tree(nodes: Sequence[int], weights: dict) -> list[tuple[int, int]]:
-    """Prim's algorithm on ``weights[(i, j)]`` (i < j), maximising the total weight; nodes must be connected."""
+    """Prim's algorithm on ``weights[(i, j)]`` (i < j), maximising the total weight; nodes must be connected.
+
+    Examples
+    --------
+    >>> maximum_spanning_tree([0, 1, 2], {(0, 1): 5.0, (0, 2): 1.0, (1, 2): 3.0})
+    [(0, 1), (1, 2)]
+    """
     nodes = list(nodes)
     adj: dict[int, list[tuple[float, int]]] = {a: [] for a in nodes}
     for (i, j), w in weights.items():

@@ -16,7 +16,18 @@ def _distance(mask: np.ndarray) -> np.ndarray:
 
 
 def seam_labels(w: Warped) -> np.ndarray:
-    """(H, W) int16 canvas: index of the image each pixel is taken from, -1 where no image covers it."""
+    """(H, W) int16 canvas: index of the image each pixel is taken from, -1 where no image covers it.
+
+    Examples
+    --------
+    Two 21x10 images overlapping over 4 columns of a 21x16 canvas: the seam falls halfway through the overlap.
+
+    >>> import numpy as np
+    >>> w = Warped([np.zeros((21, 10, 3), np.uint8)] * 2, [np.full((21, 10), 255, np.uint8)] * 2, [(0, 0), (6, 0)],
+    ...            (16, 21), (0, 0))
+    >>> seam_labels(w)[10]
+    array([0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 1, 1], dtype=int16)
+    """
     W, H = w.size
     labels = np.full((H, W), -1, np.int16)
     best = np.zeros((H, W), np.float32)
