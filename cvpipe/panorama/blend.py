@@ -22,30 +22,8 @@ from .warp import Warped
 
 def _overlaps(w: Warped, step: int):
     """Yield (i, j, gray_i, gray_j) over the subsampled overlap of every pair of warped images."""
-    n = len(w.images)
-    for i in range(n):
-        xi, yi = w.corners[i]
-        hi, wi = w.masks[i].shape
-        for j in range(i + 1, n):
-            xj, yj = w.corners[j]
-            hj, wj = w.masks[j].shape
-            x0, y0 = max(xi, xj), max(yi, yj)
-            x1, y1 = min(xi + wi, xj + wj), min(yi + hi, yj + hj)
-            if x1 <= x0 or y1 <= y0:
-                continue
-            si = (slice(y0 - yi, y1 - yi, step), slice(x0 - xi, x1 - xi, step))
-            sj = (slice(y0 - yj, y1 - yj, step), slice(x0 - xj, x1 - xj, step))
-            both = (w.masks[i][si] > 0) & (w.masks[j][sj] > 0)
-            if both.sum() < 16:
-                continue
-            gi = _gray(w.images[i][si])[both]
-            gj = _gray(w.images[j][sj])[both]
-            yield i, j, gi, gj
-
-
-def _gray(img: np.ndarray) -> np.ndarray:
-    img = np.ascontiguousarray(img)
-    return (cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 else img).astype(np.float32)
+    for i, j, _, _, gi, gj in _samples(w, step, channels=False):
+        yield i, j, gi[:, 0], gj[:, 0]
 
 
 def _step(w: Warped, samples: float = 4e5) -> int:
