@@ -575,6 +575,13 @@ def test_stages_on_a_folder_with_partial_truth(tmp_path, views, distractor, monk
     _run_stage("panorama_warp", monkeypatch, images=data, homographies=out / "homographies", out=out / "warp",
                params=params)
     _run_stage("panorama_blend", monkeypatch, warp=out / "warp", out=out / "blend", params=params)
+    # a block compensator: its record shows each image's mean gain per channel
+    blocks = tmp_path / "params_blocks.yaml"
+    blocks.write_text(params.read_text().replace("gain_compensation: gain ", "gain_compensation: channel_blocks "))
+    _run_stage("panorama_blend", monkeypatch, warp=out / "warp", out=out / "blend_blocks", params=blocks)
+    gains = np.array(io.load_json(out / "blend_blocks" / "room.json")["gains"])
+    assert gains.shape == (3, 3) and np.all(np.abs(gains - 1) < 0.3)
+    assert np.array(io.load_json(out / "blend" / "room.json")["gains"]).shape == (3,)
     _run_stage("panorama_crop", monkeypatch, blend=out / "blend", out=out / "pano", params=params)
     _run_stage("panorama_opencv_stitcher", monkeypatch, images=data, out=out / "opencv", params=params)
     report = dict(images=data, features=out / "features", homographies=out / "homographies", blend=out / "blend",
