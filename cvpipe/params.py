@@ -465,16 +465,22 @@ class PanoramaWarpParams:
 
 @dataclass(frozen=True)
 class PanoramaBlendParams:
-    """``panorama.blend``: gain compensation and the blender (multi-band with ``bands`` levels, or feather)."""
+    """``panorama.blend``: exposure compensation (``gain_compensation``: OpenCV's compensator kinds, blocks of
+    ``gain_block`` pixels) and the blender (multi-band with ``bands`` levels, or feather)."""
 
     blender: str = "multiband"
     bands: int = 5
-    gain_compensation: bool = True
+    gain_compensation: Literal["none", "gain", "channels", "blocks", "channel_blocks"] = "gain"
+    gain_block: int = 32
 
     def __post_init__(self):
         if self.blender not in ("multiband", "feather"):
             raise ValueError(f"`blender` must be one of ['feather', 'multiband'], got {self.blender!r}")
         _in_range("bands", self.bands, 1, 12)
+        gains = ["none", "gain", "channels", "blocks", "channel_blocks"]
+        if self.gain_compensation not in gains:
+            raise ValueError(f"`gain_compensation` must be one of {gains}, got {self.gain_compensation!r}")
+        _in_range("gain_block", self.gain_block, 4, 1024)
 
 
 SECTIONS.update({

@@ -273,7 +273,8 @@ def test_stitch_json_names_files(workdir, tmp_path, capsys):
 
 
 def test_choices_match_the_registries():
-    from cvpipe import features, homography, hough, stereo, warping
+    from cvpipe import features, homography, hough, stereo
+    from cvpipe.panorama import warp as warping
     from cvpipe.commands import homography as c_hom, hough as c_hough, inspect as c_insp, logo as c_logo
     from cvpipe.commands import stereo as c_stereo, stitch as c_stitch
 
