@@ -488,7 +488,7 @@ class LogoFeaturesParams(FeaturesParams):
 
 @dataclass(frozen=True)
 class LogoMatchParams:
-    """``logo.match``: scene -> gallery matching (see :func:`cvpipe.logos.match_scene`)."""
+    """``logo.match``: scene -> gallery matching (see :func:`cvpipe.logo.match_scene`)."""
 
     ratio: float = 0.95
     k: int = 8
@@ -516,7 +516,7 @@ class LogoVerifyParams:
     """``logo.verify``: homography verification, plausibility checks and the decision threshold.
 
     ``model`` is the geometric fitter for float descriptors (SIFT), ``binary_model`` for ORB, BRISK and AKAZE (see
-    :data:`cvpipe.logos.MODELS`)."""
+    :data:`cvpipe.logo.MODELS`)."""
 
     model: str = "affine_homography"
     binary_model: str = "homography"

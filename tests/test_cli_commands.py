@@ -94,7 +94,7 @@ def test_a_command_imports_only_what_it_runs(workdir):
     img = workdir / "data" / "samples" / "hough" / "synthetic_grid.png"
     code = ("import sys\nfrom cvpipe import cli\n"
             f"cli.main(['hough', {str(img)!r}, '--method', 'opencv', '--json'])\n"
-            "heavy = ('scipy.stats', 'scipy.sparse', 'cvpipe.logos', 'cvpipe.stereo', 'cvpipe.panorama',"
+            "heavy = ('scipy.stats', 'scipy.sparse', 'cvpipe.logo', 'cvpipe.stereo', 'cvpipe.panorama',"
             " 'cvpipe.defects', 'cvpipe.homography')\n"
             "print('RESULT', ','.join(sorted(m for m in heavy if m in sys.modules)) or '-', file=sys.stderr)\n")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=_env(), cwd=ROOT)
@@ -406,7 +406,7 @@ def test_two_gallery_brands_in_one_photo_are_both_found(workdir, tmp_path, capsy
 def test_overlapping_outlines_keep_only_the_best():
     from types import SimpleNamespace
 
-    from cvpipe.commands.logo import every_logo, quad_iou
+    from cvpipe.logo import every_logo, quad_iou
 
     sq = np.array([[0, 0], [100, 0], [100, 100], [0, 100]], float)
     assert quad_iou(sq, sq) == pytest.approx(1.0)

@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from .. import io, logos
+from .. import io, logo
 from ..errors import InputError
 from ..features import DETECTORS, detect
 from ..params import LogoFeaturesParams, LogoMatchParams, LogoVerifyParams, load_section
@@ -123,15 +123,15 @@ def run_benchmark(root: Path, methods: list[str], fp: LogoFeaturesParams, mp: Lo
     galleries, gallery_time = {}, {}
     for m in methods:
         t0 = time.perf_counter()
-        refs = [logos.Reference(b, n, detect(g, m, fp.max_features, _mask(g.shape, box)), (g.shape[1], g.shape[0]),
+        refs = [logo.Reference(b, n, detect(g, m, fp.max_features, _mask(g.shape, box)), (g.shape[1], g.shape[0]),
                                 box) for b, n, g, box in gallery_imgs]
-        galleries[m] = logos.build_gallery(refs, mp.min_features, mp.reference_features, mp.register_references)
+        galleries[m] = logo.build_gallery(refs, mp.min_features, mp.reference_features, mp.register_references)
         gallery_time[m] = time.perf_counter() - t0
     scenes = [(f, b, _shrink(io.read_image(root / f, "gray"), scene_scale)) for f, b in tests]
     # warm-up: one scene per method (FLANN, OpenCV thread pools, scipy imports)
     for m in methods:
         g = scenes[0][2]
-        logos.recognize(galleries[m], detect(g, m, fp.max_features, min_long_side=fp.scene_min_long_side),
+        logo.recognize(galleries[m], detect(g, m, fp.max_features, min_long_side=fp.scene_min_long_side),
                         (g.shape[1], g.shape[0]), mp, vp, seed)
     times = {m: [] for m in methods}
     answers = {m: [] for m in methods}
@@ -139,7 +139,7 @@ def run_benchmark(root: Path, methods: list[str], fp: LogoFeaturesParams, mp: Lo
         for m in methods:  # interleaved, so load changes on the shared machine hit every method alike
             t0 = time.perf_counter()
             feats = detect(g, m, fp.max_features, min_long_side=fp.scene_min_long_side)
-            det = logos.recognize(galleries[m], feats, (g.shape[1], g.shape[0]), mp, vp, seed)
+            det = logo.recognize(galleries[m], feats, (g.shape[1], g.shape[0]), mp, vp, seed)
             times[m].append(time.perf_counter() - t0)
             best = det.best
             answers[m].append({"scene": f, "truth": brand, "brand": det.brand,
@@ -152,7 +152,7 @@ def run_benchmark(root: Path, methods: list[str], fp: LogoFeaturesParams, mp: Lo
               "methods": {}}
     for m in methods:
         a = answers[m]
-        ev = logos.evaluate([x["truth"] for x in a], [x["best_brand"] for x in a], [x["score"] for x in a],
+        ev = logo.evaluate([x["truth"] for x in a], [x["best_brand"] for x in a], [x["score"] for x in a],
                             vp.score_threshold)
         ev["time_per_scene_median_s"] = statistics.median(times[m])
         ev["gallery_index_s"] = gallery_time[m]
@@ -175,23 +175,23 @@ def run_leave_one_out(root: Path, methods: list[str], fp: LogoFeaturesParams, mp
                     "methods": {}}
     for m in methods:
         refs = [(n.split("[")[0] if box is not None else None,
-                 logos.Reference(b, n, detect(g, m, fp.max_features, _mask(g.shape, box)), (g.shape[1], g.shape[0]),
+                 logo.Reference(b, n, detect(g, m, fp.max_features, _mask(g.shape, box)), (g.shape[1], g.shape[0]),
                                  box)) for b, n, g, box in gallery_imgs]
         # the links between references of one brand do not depend on which others are left out: found once
-        links = logos.reference_links([r for _, r in refs]) if mp.register_references else None
+        links = logo.reference_links([r for _, r in refs]) if mp.register_references else None
         answers = []
         for photo, (brand, gray) in tqdm(sorted(photos.items()), desc=f"loo {m}", disable=None):
             small = _shrink(gray, scene_scale)
             scene = detect(small, m, fp.max_features, min_long_side=fp.scene_min_long_side)
             for truth in (brand, None):
                 keep = [r for src, r in refs if src != photo and (truth is not None or r.brand != brand)]
-                gallery = logos.build_gallery(keep, mp.min_features, mp.reference_features, mp.register_references,
+                gallery = logo.build_gallery(keep, mp.min_features, mp.reference_features, mp.register_references,
                                               links)
-                det = logos.recognize(gallery, scene, (small.shape[1], small.shape[0]), mp, vp, seed)
+                det = logo.recognize(gallery, scene, (small.shape[1], small.shape[0]), mp, vp, seed)
                 answers.append({"scene": photo, "truth": truth, "brand": det.brand,
                                 "best_brand": det.best.brand if det.best else None, "score": det.score,
                                 "inliers": det.inliers})
-        ev = logos.evaluate([x["truth"] for x in answers], [x["best_brand"] for x in answers],
+        ev = logo.evaluate([x["truth"] for x in answers], [x["best_brand"] for x in answers],
                             [x["score"] for x in answers], vp.score_threshold)
         _summarise(ev)
         ev["scenes_detail"] = answers
@@ -200,7 +200,7 @@ def run_leave_one_out(root: Path, methods: list[str], fp: LogoFeaturesParams, mp
 
 
 def _summarise(ev: dict) -> None:
-    """Add the two operating points of the issue's target to an :func:`cvpipe.logos.evaluate` result."""
+    """Add the two operating points of the issue's target to an (:func:`cvpipe.logo.evaluate`) result."""
     ev["best_precision_at_recall_0.70"] = max((c["precision"] for c in ev["curve"] if c["recall"] >= 0.70),
                                               default=None)
     ev["best_recall_at_precision_0.95"] = max((c["recall"] for c in ev["curve"] if c["precision"] >= 0.95),
