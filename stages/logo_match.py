@@ -44,7 +44,7 @@ def load_gallery(inputs: datasets.LogoInputs, root: Path, features: Path,
                 continue
             w, h = (int(v) for v in got["image_size"])
             refs.append(logo.Reference(brand, name, Features.from_arrays(got), (w, h)))
-    gallery = logo.build_gallery(refs, params.min_features, params.reference_features, params.register_references)
+    gallery = logo.build_gallery(refs, params.min_features, params.reference_features)
     dropped += [{"item": n, "reason": f"fewer than {params.min_features} keypoints"} for n in gallery.dropped]
     return gallery, dropped
 

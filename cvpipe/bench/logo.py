@@ -125,7 +125,7 @@ def run_benchmark(root: Path, methods: list[str], fp: LogoFeaturesParams, mp: Lo
         t0 = time.perf_counter()
         refs = [logo.Reference(b, n, detect(g, m, fp.max_features, _mask(g.shape, box)), (g.shape[1], g.shape[0]),
                                 box) for b, n, g, box in gallery_imgs]
-        galleries[m] = logo.build_gallery(refs, mp.min_features, mp.reference_features, mp.register_references)
+        galleries[m] = logo.build_gallery(refs, mp.min_features, mp.reference_features)
         gallery_time[m] = time.perf_counter() - t0
     scenes = [(f, b, _shrink(io.read_image(root / f, "gray"), scene_scale)) for f, b in tests]
     # warm-up: one scene per method (FLANN, OpenCV thread pools, scipy imports)
@@ -177,16 +177,13 @@ def run_leave_one_out(root: Path, methods: list[str], fp: LogoFeaturesParams, mp
         refs = [(n.split("[")[0] if box is not None else None,
                  logo.Reference(b, n, detect(g, m, fp.max_features, _mask(g.shape, box)), (g.shape[1], g.shape[0]),
                                  box)) for b, n, g, box in gallery_imgs]
-        # the links between references of one brand do not depend on which others are left out: found once
-        links = logo.reference_links([r for _, r in refs]) if mp.register_references else None
         answers = []
         for photo, (brand, gray) in tqdm(sorted(photos.items()), desc=f"loo {m}", disable=None):
             small = _shrink(gray, scene_scale)
             scene = detect(small, m, fp.max_features, min_long_side=fp.scene_min_long_side)
             for truth in (brand, None):
                 keep = [r for src, r in refs if src != photo and (truth is not None or r.brand != brand)]
-                gallery = logo.build_gallery(keep, mp.min_features, mp.reference_features, mp.register_references,
-                                              links)
+                gallery = logo.build_gallery(keep, mp.min_features, mp.reference_features)
                 det = logo.recognize(gallery, scene, (small.shape[1], small.shape[0]), mp, vp, seed)
                 answers.append({"scene": photo, "truth": truth, "brand": det.brand,
                                 "best_brand": det.best.brand if det.best else None, "score": det.score,

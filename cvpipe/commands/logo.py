@@ -55,7 +55,7 @@ def load_gallery(folder: str | Path, detector: str, max_features: int, params: L
         gray = io.read_image(f, "gray")
         refs.append(logo.Reference(brand, str(f), detect(gray, detector, max_features),
                                     (gray.shape[1], gray.shape[0])))
-    return logo.build_gallery(refs, params.min_features, params.reference_features, params.register_references)
+    return logo.build_gallery(refs, params.min_features, params.reference_features)
 
 
 def _logo_json(h) -> dict:

@@ -11,9 +11,8 @@ or perspective, and the inliers must cover a fair part of the reference.
 
 An inlier must land within the RANSAC threshold of its predicted position *and* agree with the model in keypoint
 orientation and scale (the reference keypoint's angle and size carried through the model's local Jacobian,
-:func:`cvpipe.logo.verify.map_poses`): a chance match agrees in all three far less often than in position alone, which keeps chance
-fits rare on busy, enlarged scenes. References of one brand that register to each other can optionally be mapped
-into one shared frame (:func:`cvpipe.logo.gallery.register_references`) and verified as one model.
+:func:`cvpipe.logo.verify.map_poses`): a chance match agrees in all three far less often than in position alone,
+which keeps chance fits rare on busy, enlarged scenes.
 
 The score is an a-contrario significance, ``-log10`` of the expected number of equally good chance fits: the
 binomial tail of seeing ``inliers - 4`` of the ``matches - 4`` other matches agree with their prediction when they
@@ -29,7 +28,7 @@ recipe: :func:`recognize`, :func:`every_logo`) and ``report`` (evaluation, stage
 """
 
 from .detect import MAX_OVERLAP, Detection, decide, every_logo, quad_iou, recognize
-from .gallery import Gallery, Reference, build_gallery, reference_links, register_references
+from .gallery import Gallery, Reference, build_gallery
 from .match import Matches, match_scene
 from .report import (NO_TRUTH, confusion, draw_confusion, draw_detection, evaluate, evaluate_records, found_counts,
                      found_plot, merge_dropped, metric_key, metrics_of, pick_method, pr_rows, quad_error,
@@ -42,6 +41,6 @@ __all__ = [
     "affine_ransac", "build_gallery", "confusion", "decide", "draw_confusion", "draw_detection", "evaluate",
     "evaluate_records", "every_logo", "fit_affine", "found_counts", "found_plot", "map_poses", "match_scene",
     "merge_dropped", "metric_key", "metrics_of", "pick_method", "pose_agrees", "pose_probability", "pr_rows",
-    "quad_error", "quad_iou", "recognize", "reference_links", "register_references", "report_summary",
+    "quad_error", "quad_iou", "recognize", "report_summary",
     "scene_record", "shape_problem", "significance", "verify",
 ]

@@ -2,20 +2,16 @@
 
 from __future__ import annotations
 
-import itertools
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import cv2
 import numpy as np
 
-from ..errors import EstimationError, InputError
+from ..errors import InputError
 from ..features import DETECTORS, Features, check_detector
 from ..geometry import image_corners
-from ..homography import find_homography
 from ..matching import flann_matcher
-from ..params import LogoVerifyParams
-from .verify import shape_problem, significance
 
 
 @dataclass(frozen=True)
@@ -79,13 +75,6 @@ class Gallery:
         Keypoint index inside its reference of every stacked descriptor.
     brand_of_ref : (R,) int64
         Index into ``brands`` of every reference.
-    frame_of_ref : (R,) int64
-        Shared frame of every reference (see :func:`register_references`); every reference is its own frame when
-        the gallery was built without registration.
-    to_frame : (R, 3, 3) float64
-        Homography from each reference's pixels to the pixels of its frame's anchor reference.
-    anchors : (F,) int64
-        Anchor reference of every frame.
     """
 
     detector: str
@@ -96,16 +85,6 @@ class Gallery:
     local_of: np.ndarray
     brand_of_ref: np.ndarray
     matcher: cv2.DescriptorMatcher = field(repr=False)
-    frame_of_ref: np.ndarray | None = None
-    to_frame: np.ndarray | None = None
-    anchors: np.ndarray | None = None
-
-    def __post_init__(self):
-        if self.frame_of_ref is None:  # no registration: every reference is its own frame
-            n = len(self.references)
-            object.__setattr__(self, "frame_of_ref", np.arange(n, dtype=np.int64))
-            object.__setattr__(self, "to_frame", np.repeat(np.eye(3)[None], n, axis=0))
-            object.__setattr__(self, "anchors", np.arange(n, dtype=np.int64))
 
     @property
     def binary(self) -> bool:
@@ -129,8 +108,7 @@ def _strongest(f: Features, n: int) -> Features:
 
 
 def build_gallery(references: Sequence[Reference], min_features: int = 8,
-                  max_features: int | None = None, register: bool = False,
-                  links: dict[tuple[str, str], tuple[np.ndarray, int]] | None = None) -> Gallery:
+                  max_features: int | None = None) -> Gallery:
     """Index the references of every brand once.
 
     Parameters
@@ -144,12 +122,6 @@ def build_gallery(references: Sequence[Reference], min_features: int = 8,
         Keep at most this many keypoints per reference, the strongest by detector response. The binary detectors
         find up to 4000 keypoints inside one boxed logo, and the brute-force Hamming search costs in proportion to
         the stacked total. Default: keep all.
-    register : bool
-        Map the references of each brand into shared frames (:func:`register_references`), so that verification
-        pools the matches of every reference of a frame into one model. Default: every reference on its own.
-    links : dict, optional
-        Precomputed :func:`reference_links` of (a superset of) these references, keyed by reference names; only
-        used with ``register``. Default: computed here.
 
     Raises
     ------
@@ -202,130 +174,6 @@ def build_gallery(references: Sequence[Reference], min_features: int = 8,
     cv2.setRNGSeed(0)
     matcher.train()
     brand_of_ref = np.array([brands.index(r.brand) for r in usable], np.int64)
-    if not register:
-        return Gallery(detector, brands, tuple(usable), dropped, ref_of, local_of, brand_of_ref, matcher)
-    if links is None:
-        links = reference_links(usable)
-    frame_of_ref, to_frame, anchors = register_references(usable, links)
-    return Gallery(detector, brands, tuple(usable), dropped, ref_of, local_of, brand_of_ref, matcher,
-                   frame_of_ref, to_frame, anchors)
-
-
-def reference_links(references: Sequence[Reference], ratio: float = 0.8, threshold: float = 3.0,
-                    min_inliers: int = 12, params: LogoVerifyParams | None = None,
-                    rng=0) -> dict[tuple[str, str], tuple[np.ndarray, int]]:
-    """Homographies between the references of each brand that show the same logo.
-
-    Every pair of references of one brand is matched (nearest neighbour with Lowe's ratio test) and fitted by
-    RANSAC; a link is kept when it has at least ``min_inliers`` inliers, its a-contrario score is positive, and
-    the first logo outline maps onto the second as a plausible view of the same flat logo (convex, not mirrored,
-    area 1/4 to 4 times the second outline's, anisotropy at most ``params.max_anisotropy``). Logo variants (a
-    wordmark and an emblem of one brand) do not link, and stay separate.
-
-    Parameters
-    ----------
-    references : sequence of Reference
-    ratio : float
-        Ratio-test threshold for reference-to-reference matches.
-    threshold : float
-        RANSAC threshold in pixels of the second reference.
-    min_inliers : int
-    params : LogoVerifyParams, optional
-        ``max_anisotropy`` and ``max_perspective`` for the plausibility check.
-    rng : None, int or Generator
-
-    Returns
-    -------
-    dict
-        ``(name_i, name_j) -> (H, inliers)`` with ``H`` mapping reference i's pixels to reference j's, for i
-        before j in ``references``.
-    """
-    p = params or LogoVerifyParams()
-    rng = np.random.default_rng(rng)
-    refs = list(references)
-    if not refs:
-        return {}
-    binary = DETECTORS[refs[0].features.detector][1]
-    matcher = cv2.BFMatcher(cv2.NORM_HAMMING if binary else cv2.NORM_L2)
-    desc = [_prepare(r.features.descriptors, binary) for r in refs]
-    link_params = replace(p, min_area=0.25, max_area=4.0)
-    out: dict[tuple[str, str], tuple[np.ndarray, int]] = {}
-    for i, j in itertools.combinations(range(len(refs)), 2):
-        a, b = refs[i], refs[j]
-        if a.brand != b.brand or len(desc[i]) < min_inliers or len(desc[j]) < min_inliers:
-            continue
-        knn = matcher.knnMatch(desc[i], desc[j], k=2)
-        good = [m[0] for m in knn if len(m) == 2 and m[0].distance < ratio * m[1].distance]
-        if len(good) < min_inliers:
-            continue
-        src = a.features.xy[[m.queryIdx for m in good]].astype(np.float64)
-        dst = b.features.xy[[m.trainIdx for m in good]].astype(np.float64)
-        try:
-            fit = find_homography(src, dst, threshold=threshold, confidence=0.999, max_iters=2000, rng=rng)
-        except EstimationError:
-            continue
-        n_in = int(np.sum(fit.inliers))
-        if n_in < min_inliers:
-            continue
-        q = b.outline
-        box_size = (q[1, 0] - q[0, 0] + 1.0, q[2, 1] - q[1, 1] + 1.0)
-        if significance(n_in, len(good), threshold, box_size[0] * box_size[1], 1) <= 0:
-            continue
-        if shape_problem(fit.H, a.outline, box_size, link_params):
-            continue
-        out[(a.name, b.name)] = (np.asarray(fit.H, np.float64), n_in)
-    return out
-
-
-def register_references(references: Sequence[Reference], links: dict[tuple[str, str], tuple[np.ndarray, int]]
-                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Group linked references into frames and map each into its frame's anchor reference.
-
-    The references joined by :func:`reference_links` form connected groups; the anchor of a group is its member
-    with the most link inliers, and every other member is mapped into the anchor by composing the links along the
-    maximum spanning tree (most inliers first) grown from the anchor. Matches to any member of a group can then be
-    verified together as one model of the logo, which finds a logo that no single reference matches often enough.
-
-    Returns
-    -------
-    frame_of_ref : (R,) int64
-    to_frame : (R, 3, 3) float64
-        Reference pixels -> anchor pixels (identity for the anchors).
-    anchors : (F,) int64
-    """
-    refs = list(references)
-    n = len(refs)
-    index = {r.name: i for i, r in enumerate(refs)}
-    adj: dict[int, dict[int, tuple[np.ndarray, int]]] = {i: {} for i in range(n)}
-    for (na, nb), (H, n_in) in links.items():
-        if na in index and nb in index:
-            i, j = index[na], index[nb]
-            adj[i][j] = (H, n_in)  # i -> j
-            adj[j][i] = (np.linalg.inv(H), n_in)
-    frame_of_ref = np.full(n, -1, np.int64)
-    to_frame = np.repeat(np.eye(3)[None], n, axis=0)
-    anchors: list[int] = []
-    for start in range(n):
-        if frame_of_ref[start] >= 0:
-            continue
-        comp, stack = {start}, [start]
-        while stack:
-            for j in adj[stack.pop()]:
-                if j not in comp:
-                    comp.add(j)
-                    stack.append(j)
-        anchor = max(sorted(comp), key=lambda i: sum(v[1] for v in adj[i].values()))
-        f = len(anchors)
-        anchors.append(anchor)
-        frame_of_ref[anchor] = f
-        # Prim's algorithm on inlier counts: attach the strongest link from the tree each time
-        while True:
-            best = max(((adj[i][j][1], j, i) for i in comp if frame_of_ref[i] == f for j in adj[i]
-                        if frame_of_ref[j] < 0), default=None)
-            if best is None:
-                break
-            _, child, parent = best
-            frame_of_ref[child] = f
-            H = to_frame[parent] @ adj[child][parent][0]
-            to_frame[child] = H / H[2, 2]
-    return frame_of_ref, to_frame, np.array(anchors, np.int64)
+    # mapping the references of one brand into a shared frame and verifying them as one model was measured and
+    # rejected (no gain on FlickrLogos: BENCHMARKS.md, logo); every reference is verified on its own
+    return Gallery(detector, brands, tuple(usable), dropped, ref_of, local_of, brand_of_ref, matcher)

@@ -46,10 +46,7 @@ class Hypothesis:
     reason : str
         Why the hypothesis was rejected, empty when it passed every check.
     reference_xy : (K, 2) float64
-        The inliers' reference keypoints in the pixels of ``reference`` (the frame's anchor).
-    pair_refs : (K,) int64
-        Reference of each inlier pair (``pairs[:, 0]`` indexes that reference's keypoints); differs from
-        ``reference`` when the frame pools several registered references.
+        The inliers' reference keypoints in the pixels of ``reference``.
     """
 
     brand: str
@@ -62,7 +59,6 @@ class Hypothesis:
     pairs: np.ndarray
     reason: str = ""
     reference_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
-    pair_refs: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     @property
     def plausible(self) -> bool:
@@ -301,10 +297,11 @@ def significance(inliers: int, matches: int, threshold: float, area: float, n_re
 
 
 def _check(brand: str, r: int, ref: Reference, H: np.ndarray, inl: np.ndarray, src: np.ndarray, dst: np.ndarray,
-           g_idx: np.ndarray, s_idx: np.ndarray, m_ref: np.ndarray, scene_size: tuple[int, int], n_tested: int,
+           g_idx: np.ndarray, s_idx: np.ndarray, scene_size: tuple[int, int], n_tested: int,
            p: LogoVerifyParams, pose_prob: float = 1.0) -> Hypothesis:
-    """Plausibility checks and score of one fitted model (see :func:`verify`); ``src`` in the anchor's pixels."""
-    # one inlier per scene keypoint: the matches of one scene keypoint to several references of a frame agree
+    """Plausibility checks and score of one fitted model (see :func:`verify`)."""
+    # one inlier per scene keypoint: with `per_reference` > 1 a scene keypoint may match both twins of a symmetric
+    # mark, and both may agree with the model
     _, first = np.unique(np.where(inl, s_idx, -1), return_index=True)
     keep = np.zeros(len(inl), bool)
     keep[first] = True
@@ -324,7 +321,7 @@ def _check(brand: str, r: int, ref: Reference, H: np.ndarray, inl: np.ndarray, s
     if not reason:
         area = float(scene_size[0] * scene_size[1])
         score = significance(n_in, n_matches, p.ransac_threshold, area, n_tested, pose_prob)
-    return Hypothesis(brand, r, n_matches, n_in, score, H, quad, pairs, reason, src[keep], m_ref[keep])
+    return Hypothesis(brand, r, n_matches, n_in, score, H, quad, pairs, reason, src[keep])
 
 
 def _reprojection_inliers(H: np.ndarray, src: np.ndarray, dst: np.ndarray, threshold: float,
@@ -382,8 +379,8 @@ MODELS = {"homography": _fit_homography, "affine_homography": _fit_affine_homogr
 
 def verify(gallery: Gallery, matches: Matches, scene: Features | np.ndarray, scene_size: tuple[int, int],
            params: LogoVerifyParams | None = None, rng=None) -> list[Hypothesis]:
-    """Fit and check one model per gallery frame (a reference, or a group of registered references, see
-    :func:`register_references`) that has at least ``min_matches`` tentatively matched scene keypoints.
+    """Fit and check one model per gallery reference that has at least ``min_matches`` tentatively matched scene
+    keypoints.
 
     The fitter is ``params.model`` for float descriptors (SIFT) and ``params.binary_model`` for the binary ones (see
     :data:`MODELS`): binary detectors put their keypoints in dense clusters on texture, where 3-point affine samples
@@ -391,7 +388,7 @@ def verify(gallery: Gallery, matches: Matches, scene: Features | np.ndarray, sce
     predicted position and, when the scene's keypoint orientations and sizes are given, agree with the model's
     predicted orientation (``angle_tolerance``) and scale (``scale_tolerance``); the score then counts that
     agreement as evidence (:func:`significance`). When the best RANSAC fit fails the checks, its inliers are set
-    aside and the remaining matches are fitted again (at most ``max_models`` fits per frame); the number of fits
+    aside and the remaining matches are fitted again (at most ``max_models`` fits per reference); the number of fits
     enters the score's multiple-test count.
 
     Parameters
@@ -410,7 +407,7 @@ def verify(gallery: Gallery, matches: Matches, scene: Features | np.ndarray, sce
     Returns
     -------
     list of Hypothesis
-        One per tested frame, sorted by score (best first); ``Hypothesis.reference`` is the frame's anchor.
+        One per tested reference, sorted by score (best first).
     """
     p = params or LogoVerifyParams()
     rng = np.random.default_rng(rng)
@@ -419,26 +416,20 @@ def verify(gallery: Gallery, matches: Matches, scene: Features | np.ndarray, sce
     scene_pose = (np.c_[scene.angle, np.log(np.maximum(scene.size, 1e-6))].astype(np.float64) if use_pose
                   else None)
     pose_prob = pose_probability(p.angle_tolerance, p.scale_tolerance) if use_pose else 1.0
-    frame = gallery.frame_of_ref[matches.ref]
-    frames = np.unique(frame)
-    # a scene keypoint matched to several references of one frame counts once
-    counts = {int(f): len(np.unique(matches.scene_idx[frame == f])) for f in frames}
-    tested = [f for f in frames if counts[int(f)] >= p.min_matches]
+    refs = np.unique(matches.ref)
+    # a scene keypoint matched to several keypoints of one reference counts once
+    counts = {int(r): len(np.unique(matches.scene_idx[matches.ref == r])) for r in refs}
+    tested = [int(r) for r in refs if counts[int(r)] >= p.min_matches]
     fitter = MODELS[p.binary_model if gallery.binary else p.model]
     out = []
-    for f in tested:
-        r = int(gallery.anchors[f])
+    for r in tested:
         ref = gallery.references[r]
-        sel = frame == f
-        g_idx, s_idx, m_ref = matches.gallery_idx[sel], matches.scene_idx[sel], matches.ref[sel]
-        src, src_pose = np.empty((len(g_idx), 2)), np.empty((len(g_idx), 2))
-        for k in np.unique(m_ref):  # every reference's keypoints in the anchor's pixels
-            at, kf = m_ref == k, gallery.references[int(k)].features
-            xy = kf.xy[g_idx[at]].astype(np.float64)
-            src[at] = apply_homography(gallery.to_frame[k], xy)
-            if use_pose:
-                pose = np.c_[kf.angle[g_idx[at]], np.log(np.maximum(kf.size[g_idx[at]], 1e-6))].astype(np.float64)
-                src_pose[at] = map_poses(gallery.to_frame[k], xy, pose)
+        sel = matches.ref == r
+        g_idx, s_idx = matches.gallery_idx[sel], matches.scene_idx[sel]
+        kf = ref.features
+        src = kf.xy[g_idx].astype(np.float64)
+        src_pose = (np.c_[kf.angle[g_idx], np.log(np.maximum(kf.size[g_idx], 1e-6))].astype(np.float64) if use_pose
+                    else None)
         dst = scene_xy[s_idx]
         dst_pose = scene_pose[s_idx] if use_pose else None
         brand = ref.brand
@@ -454,12 +445,12 @@ def verify(gallery: Gallery, matches: Matches, scene: Features | np.ndarray, sce
                                     (src_pose[left], dst_pose[left]) if use_pose else None)
             except EstimationError as exc:
                 if hyp is None:
-                    hyp = Hypothesis(brand, r, counts[int(f)], 0, -np.inf, None, None, none, f"no homography: {exc}",
+                    hyp = Hypothesis(brand, r, counts[r], 0, -np.inf, None, None, none, f"no homography: {exc}",
                                      np.zeros((0, 2)))
                 break
             inl = np.zeros(len(src), bool)
             inl[np.flatnonzero(left)[fit_inl]] = True
-            cand = _check(brand, r, ref, H, inl, src, dst, g_idx, s_idx, m_ref, scene_size,
+            cand = _check(brand, r, ref, H, inl, src, dst, g_idx, s_idx, scene_size,
                           len(tested) * attempt, p, pose_prob)
             if hyp is None or (hyp.reason and not cand.reason):
                 hyp = cand
