@@ -117,16 +117,52 @@ def quad_iou(a: np.ndarray, b: np.ndarray) -> float:
     return float(inter / union) if union > 0 else 0.0
 
 
-def every_logo(det: Detection, score_threshold: float, max_overlap: float = MAX_OVERLAP) -> list[Hypothesis]:
-    """Every plausible hypothesis of a scene that reaches ``score_threshold``, best first, after non-maximum
-    suppression: a hypothesis whose outline overlaps a better one by more than ``max_overlap`` IoU is dropped.
+#: score a second or later logo of a scene needs (the first needs ``score_threshold``; the higher one counts).
+#: Chosen on ``cvpipe bench logo --protocol loo``, where no value up to 296 loses or gains anything, so the lowest:
+#: no stricter rule (BENCHMARKS.md, "logo: several brands per photo")
+DEFAULT_EXTRA_SCORE = 0.0
 
-    The first entry, when there is one, is the scene's ``brand`` (the same ordering as :func:`decide`).
+
+def every_logo(det: Detection, score_threshold: float, max_overlap: float = MAX_OVERLAP,
+               extra_score: float | None = None) -> list[Hypothesis]:
+    """Every logo found in a scene: the plausible hypotheses that reach the score thresholds, best first, after
+    non-maximum suppression of overlapping outlines.
+
+    Parameters
+    ----------
+    det : Detection
+        From :func:`recognize` (or :func:`decide`).
+    score_threshold : float
+        Score the best logo needs (``logo.verify.score_threshold``).
+    max_overlap : float
+        A hypothesis whose outline overlaps a better kept one by more than this intersection-over-union is the same
+        logo seen again (another reference, or a second fit) and is dropped.
+    extra_score : float, optional
+        Score every further logo needs; never below ``score_threshold``. Default :data:`DEFAULT_EXTRA_SCORE`.
+
+    Returns
+    -------
+    list of Hypothesis
+        The first entry, when there is one, is the scene's ``brand`` (the ordering of :func:`decide`).
+
+    Examples
+    --------
+    >>> sq = np.array([[0, 0], [100, 0], [100, 100], [0, 100]], float)
+    >>> def hyp(brand, score, dx):
+    ...     return Hypothesis(brand, 0, 30, 20, score, np.eye(3), sq + [dx, 0], np.zeros((0, 2), np.int64))
+    >>> det = Detection("a", 50.0, 20, sq, None, [hyp("a", 50.0, 0), hyp("b", 40.0, 10), hyp("c", 30.0, 300)])
+    >>> [h.brand for h in every_logo(det, 0.0)]  # b overlaps a (IoU 0.82): the same logo
+    ['a', 'c']
+    >>> [h.brand for h in every_logo(det, 0.0, extra_score=35.0)]  # c is not strong enough for a second logo
+    ['a']
     """
+    extra = max(score_threshold, DEFAULT_EXTRA_SCORE if extra_score is None else extra_score)
     good = sorted((h for h in det.hypotheses if h.plausible and h.quad is not None and h.score >= score_threshold),
                   key=lambda h: (h.score, h.inliers), reverse=True)
     kept: list[Hypothesis] = []
     for h in good:
+        if kept and h.score < extra:
+            break  # sorted by score: no later one reaches it either
         if all(quad_iou(h.quad, k.quad) <= max_overlap for k in kept):
             kept.append(h)
     return kept
