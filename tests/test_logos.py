@@ -805,4 +805,5 @@ def test_multi_evaluate_counts_every_true_brand():
     assert (ev["correct"], ev["answered"], ev["positives"]) == (2, 3, 3)
     ev = multi_evaluate(rows, extra_score=10.0)  # b's 5 is not enough for a second logo; d is a first logo
     assert (ev["correct"], ev["answered"], ev["positives"]) == (1, 2, 3)
-    assert ev["one_brand_precision"] == 0.5 and ev["one_brand_recall"] == 0.5  # a right in 1 of the 2 photos with a logo
+    # one brand: a is right in scene 1, d wrong in scene 2; 1 right of the 2 photos that hold a logo
+    assert ev["one_brand_precision"] == 0.5 and ev["one_brand_recall"] == 0.5

@@ -136,8 +136,8 @@ def found_list(det: logo.Detection, score_threshold: float) -> list[list]:
 def multi_evaluate(rows: list[dict], extra_score: float) -> dict:
     """Several-brands figures over ``rows`` (``{"truth_all": [brands], "found": found_list(...)}``): the first logo
     of a scene counts as found, each later one when its score reaches ``extra_score``; a scene's distinct found
-    brands are compared with its true brands. Also the one-brand answer (the first logo) judged right when the photo holds that brand: its precision,
-    and its recall over the photos that hold a gallery brand."""
+    brands are compared with its true brands. Also the one-brand answer (the first logo), judged right when the
+    photo holds that brand: its precision, and its recall over the photos that hold a gallery brand."""
     tp = answered = positives = one_tp = one_answered = with_logo = 0
     for r in rows:
         truth = set(r["truth_all"])
