@@ -807,3 +807,18 @@ def test_multi_evaluate_counts_every_true_brand():
     assert (ev["correct"], ev["answered"], ev["positives"]) == (1, 2, 3)
     # one brand: a is right in scene 1, d wrong in scene 2; 1 right of the 2 photos that hold a logo
     assert ev["one_brand_precision"] == 0.5 and ev["one_brand_recall"] == 0.5
+
+
+def test_extra_labels_name_photos_of_the_subset_and_new_brands(data_root):
+    """Each correction names a photo of the subset and a brand its own label does not already give."""
+    import csv
+
+    from cvpipe.bench.logo import SUBSET, load_extra_labels
+
+    if not (data_root / SUBSET).is_dir():
+        pytest.skip(f"{SUBSET} not in {data_root}")
+    with (data_root / SUBSET / "scenes.csv").open(newline="") as fh:
+        labels = {r["image"]: r["brand"] for r in csv.DictReader(fh)}
+    for image, brands in load_extra_labels().items():
+        assert image in labels, image
+        assert labels[image] not in brands, image
