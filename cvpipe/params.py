@@ -511,27 +511,20 @@ class LogoFeaturesParams(FeaturesParams):
 
 @dataclass(frozen=True)
 class LogoMatchParams:
-    """``logo.match``: scene -> gallery matching (see :func:`cvpipe.logos.match_scene`)."""
+    """``logo.match``: scene -> gallery matching (see :func:`cvpipe.logo.match_scene`)."""
 
     ratio: float = 0.95
     k: int = 8
     per_reference: int = 1
     min_features: int = 8
     reference_features: int = 1000
-    register_references: bool = False
-    reverse_shortlist: int = 0
-    reverse_ratio: float = 0.8
 
     def __post_init__(self):
         _in_range("ratio", self.ratio, 0.0, 1.0, lo_open=True)
-        _in_range("reverse_shortlist", self.reverse_shortlist, 0, 100_000)
-        _in_range("reverse_ratio", self.reverse_ratio, 0.0, 1.0, lo_open=True)
         _in_range("k", self.k, 2, 100)
         _in_range("per_reference", self.per_reference, 1, self.k)
         _in_range("min_features", self.min_features, 4, 100_000)
         _in_range("reference_features", self.reference_features, self.min_features, 1_000_000)
-        if not isinstance(self.register_references, bool):
-            raise ValueError(f"`register_references` must be true or false, got {self.register_references!r}")
 
 
 @dataclass(frozen=True)
@@ -539,7 +532,7 @@ class LogoVerifyParams:
     """``logo.verify``: homography verification, plausibility checks and the decision threshold.
 
     ``model`` is the geometric fitter for float descriptors (SIFT), ``binary_model`` for ORB, BRISK and AKAZE (see
-    :data:`cvpipe.logos.MODELS`)."""
+    :data:`cvpipe.logo.MODELS`)."""
 
     model: str = "affine_homography"
     binary_model: str = "homography"

@@ -12,7 +12,7 @@ from ..params import LogoFeaturesParams, LogoMatchParams, LogoVerifyParams
 from . import compile_note, overlay_paths, progress, step
 
 if TYPE_CHECKING:
-    from .. import logos
+    from .. import logo
 
 HELP = "recognise gallery logos in scene photos (brand or none, and the logo outline)"
 EXAMPLE = ("cvpipe logo data/samples/logo/scenes/scene_00.jpg --gallery data/samples/logo/gallery "
@@ -45,48 +45,17 @@ def gallery_files(folder: str | Path) -> list[tuple[str, Path]]:
     return sorted(items, key=lambda t: (t[0], str(t[1])))
 
 
-def load_gallery(folder: str | Path, detector: str, max_features: int, params: LogoMatchParams) -> logos.Gallery:
+def load_gallery(folder: str | Path, detector: str, max_features: int, params: LogoMatchParams) -> logo.Gallery:
     """Read, detect and index a gallery folder (see :func:`gallery_files`)."""
-    from .. import io, logos
+    from .. import io, logo
     from ..features import detect
 
     refs = []
     for brand, f in progress(gallery_files(folder), "gallery"):
         gray = io.read_image(f, "gray")
-        refs.append(logos.Reference(brand, str(f), detect(gray, detector, max_features),
+        refs.append(logo.Reference(brand, str(f), detect(gray, detector, max_features),
                                     (gray.shape[1], gray.shape[0])))
-    return logos.build_gallery(refs, params.min_features, params.reference_features, params.register_references)
-
-
-#: two found outlines overlapping by more than this intersection-over-union are one logo (the better one is kept)
-MAX_OVERLAP = 0.3
-
-
-def quad_iou(a, b) -> float:
-    """Intersection over union of two convex quadrilaterals ((4, 2) corner arrays, scene pixels)."""
-    import cv2
-    import numpy as np
-
-    pa, pb = np.asarray(a, np.float32).reshape(4, 2), np.asarray(b, np.float32).reshape(4, 2)
-    area_a, area_b = abs(cv2.contourArea(pa)), abs(cv2.contourArea(pb))
-    inter, _ = cv2.intersectConvexConvex(pa, pb)
-    union = area_a + area_b - inter
-    return float(inter / union) if union > 0 else 0.0
-
-
-def every_logo(det: logos.Detection, score_threshold: float, max_overlap: float = MAX_OVERLAP) -> list:
-    """Every plausible hypothesis of a scene that reaches ``score_threshold``, best first, after non-maximum
-    suppression: a hypothesis whose outline overlaps a better one by more than ``max_overlap`` IoU is dropped.
-
-    The first entry, when there is one, is the scene's ``brand`` (the same ordering as ``logos.decide``).
-    """
-    good = sorted((h for h in det.hypotheses if h.plausible and h.quad is not None and h.score >= score_threshold),
-                  key=lambda h: (h.score, h.inliers), reverse=True)
-    kept: list = []
-    for h in good:
-        if all(quad_iou(h.quad, k.quad) <= max_overlap for k in kept):
-            kept.append(h)
-    return kept
+    return logo.build_gallery(refs, params.min_features, params.reference_features)
 
 
 def _logo_json(h) -> dict:
@@ -94,7 +63,7 @@ def _logo_json(h) -> dict:
             "quad": [[round(float(x), 2), round(float(y), 2)] for x, y in h.quad]}
 
 
-def detection_json(scene: str, det: logos.Detection, found: list | None = None) -> dict:
+def detection_json(scene: str, det: logo.Detection, found: list | None = None) -> dict:
     """The interface-contract record of one scene (``score`` is null when no hypothesis survived)."""
     return {"scene": scene, "brand": det.brand, "inliers": int(det.inliers),
             "score": round(float(det.score), 3) if math.isfinite(det.score) else None,
@@ -127,7 +96,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .. import io, logos
+    from .. import io, logo
     from ..errors import CvpipeError, InputError
     from ..features import detect
     from ..overlays import draw_quads
@@ -151,10 +120,10 @@ def run(args: argparse.Namespace) -> int:
         try:
             with step(scene):
                 gray = io.read_image(scene, "gray")  # as before: a JPEG decoded to gray is not cvtColor's gray
-                det = logos.recognize(gallery, detect(gray, args.method, args.max_features,
+                det = logo.recognize(gallery, detect(gray, args.method, args.max_features,
                                                       min_long_side=args.min_long_side),
                                       (gray.shape[1], gray.shape[0]), mp, vp, args.seed)
-            found = every_logo(det, vp.score_threshold)
+            found = logo.every_logo(det, vp.score_threshold)
             records.append(detection_json(scene, det, found))
             if picture:
                 io.save_image(picture, draw_quads(io.read_image(scene, "color"), [h.quad for h in found],
