@@ -29,7 +29,7 @@ The module takes arrays only; reading the gallery folder lives in the command, s
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import cv2
@@ -40,7 +40,7 @@ from scipy.stats import binom
 from .errors import EstimationError, InputError
 from .features import DETECTORS, Features, check_detector
 from .homography import find_homography
-from .params import LogoMatchParams, LogoVerifyParams
+from .params import LogoMatchParams, LogoVerifyParams, replace
 
 _FLANN_KDTREE = 1
 

@@ -122,9 +122,9 @@ def _range(info: Any, bound: Bound | None = None, limit: Any = None) -> str:
         else:
             lo = side
     if lo and hi:
-        return f"in {lo[0]}{repr(lo[2])}, {repr(hi[2])}{hi[0]}"
+        return f"in {lo[0]}{lo[2]!r}, {hi[2]!r}{hi[0]}"
     lo = lo or hi
-    return f"{lo[1]} {repr(lo[2])}"
+    return f"{lo[1]} {lo[2]!r}"
 
 
 def _choices(tp: Any) -> list | None:

@@ -5,7 +5,6 @@ the metrics file. Layout: every subfolder is one pair with ``left.*`` / ``right.
 one pair); max_disp is the pair's own (truth.json ``max_disp`` or calib.txt ``ndisp``), else
 ``stereo.disparity.max_disp``."""
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +31,7 @@ def read_truth(path: Path, shape: tuple[int, ...]) -> np.ndarray:
 
 def stereo_disparity(st: Stage) -> None:
     a, method = st.args, st.args.method
-    options = dataclasses.asdict(load_section(SECTIONS[f"stereo.{method}"], f"stereo.{method}", a.params))
+    options = load_section(SECTIONS[f"stereo.{method}"], f"stereo.{method}", a.params).model_dump()
     pairs, dropped = datasets.find_stereo(a.pairs)
     for d in dropped:
         st.drop(d["item"], d["reason"])

@@ -16,7 +16,6 @@ import os
 import re
 import statistics
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +25,7 @@ from .. import blending, io, panorama, warping
 from ..errors import EstimationError, InputError
 from ..metrics import corner_error
 from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
-                      PanoramaWarpParams)
+                      PanoramaWarpParams, replace)
 
 HELP = "panorama stitching vs cv2.Stitcher on the Adobe and OpenStitching sets"
 EXAMPLE = "cvpipe bench panorama --data ../shared/data --repeat 3 --json"
