@@ -40,7 +40,6 @@ T = TypeVar("T")
 Detector = Literal["sift", "orb", "brisk", "akaze"]
 
 _OPS = {">=": operator.ge, ">": operator.gt, "<=": operator.le}
-_OP_WORDS = {">=": "at least", ">": "above", "<=": "at most"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -64,7 +63,7 @@ class Section(BaseModel):
         try:
             super().__init__(**data)
         except ValidationError as exc:
-            raise InputError(_message(type(self), exc, "")) from exc
+            raise InputError(_message(type(self), exc, "", data)) from exc
 
     # pydantic calls an overridden __init__ from model_validate too (whose errors from_mapping words with the
     # section's name); this mark, the one BaseModel.__init__ carries, keeps validation on pydantic's own path
@@ -75,7 +74,7 @@ class Section(BaseModel):
     def _exact_choice(cls, value: Any, info: Any) -> Any:
         """A choice matches by type too: pydantic's ``Literal[3, 5, 7]`` takes ``3.0`` even in strict mode."""
         choices = _choices(cls.model_fields[info.field_name].annotation)
-        if choices and not any(type(value) is type(c) and value == c for c in choices):
+        if choices and value is not None and not any(type(value) is type(c) and value == c for c in choices):
             raise PydanticCustomError("literal_error", "not one of the choices", {"expected": str(choices)})
         return value
 
@@ -92,7 +91,17 @@ class Section(BaseModel):
         return self
 
     def replace(self: T, **changes: Any) -> T:
-        """A validated copy with ``changes`` (``dataclasses.replace`` for a section)."""
+        """A validated copy with ``changes`` (``dataclasses.replace`` for a section).
+
+        Examples
+        --------
+        >>> MatchParams().replace(ratio=0.7).ratio
+        0.7
+        >>> MatchParams().replace(ratio=0.0)
+        Traceback (most recent call last):
+        ...
+        cvpipe.errors.InputError: `ratio` must be in (0.0, 1.0], got 0.0
+        """
         return type(self)(**{**dict(self), **changes})
 
 
@@ -104,27 +113,23 @@ def replace(obj: T, /, **changes: Any) -> T:
 
 
 def _range(info: Any, bound: Bound | None = None, limit: Any = None) -> str:
-    """``"in (0.0, 1.0]"``, ``"> 0"``... from a field's ``Field`` limits, ``bound`` replacing the side it sets."""
-    lo = hi = None
+    """``"[0, 1.0]"``, ``"(0.0, inf]"``... from a field's ``Field`` limits, ``bound`` (set to ``limit``) replacing the
+    side it sets."""
+    lo, hi = "[-inf", "inf]"
     for m in info.metadata:
         if isinstance(m, annotated_types.Gt):
-            lo = ("(", ">", m.gt)
+            lo = f"({m.gt!r}"
         elif isinstance(m, annotated_types.Ge):
-            lo = ("[", ">=", m.ge)
+            lo = f"[{m.ge!r}"
         elif isinstance(m, annotated_types.Lt):
-            hi = (")", "<", m.lt)
+            hi = f"{m.lt!r})"
         elif isinstance(m, annotated_types.Le):
-            hi = ("]", "<=", m.le)
-    if bound is not None:
-        side = ({">=": "[", ">": "("}.get(bound.op) or "]", bound.op, limit)
-        if bound.op == "<=":
-            hi = side
-        else:
-            lo = side
-    if lo and hi:
-        return f"in {lo[0]}{lo[2]!r}, {hi[2]!r}{hi[0]}"
-    lo = lo or hi
-    return f"{lo[1]} {lo[2]!r}"
+            hi = f"{m.le!r}]"
+    if bound is not None and bound.op == "<=":
+        hi = f"{limit!r}]"
+    elif bound is not None:
+        lo = f"{'[' if bound.op == '>=' else '('}{limit!r}"
+    return f"{lo}, {hi}"
 
 
 def _choices(tp: Any) -> list | None:
@@ -143,11 +148,13 @@ _TYPE_WORDS = {
 }
 
 
-def _message(cls: type[BaseModel], exc: ValidationError, section: str) -> str:
-    """One line for the first error of ``exc``, naming the dotted key (``section.field``) and what it accepts."""
+def _message(cls: type[BaseModel], exc: ValidationError, section: str, data: Any) -> str:
+    """One line for the first error of ``exc``, naming the dotted key (``section.field``) and what it accepts.
+
+    ``data`` is what was validated: a limit set by another field (:class:`Bound`) is read from it."""
     err = exc.errors(include_url=False)[0]
     kind, value, ctx = err["type"], err.get("input"), err.get("ctx") or {}
-    key, model, info, tuple_key = section, cls, None, section
+    key, model, owner, info, tuple_key, node, parent = section, cls, cls, None, section, data, None
     if kind == "bound":
         loc = (*err["loc"], ctx["field"])
     else:
@@ -158,18 +165,23 @@ def _message(cls: type[BaseModel], exc: ValidationError, section: str) -> str:
         elif isinstance(model, type) and issubclass(model, BaseModel) and part in model.model_fields:
             info = model.model_fields[part]
             key = tuple_key = f"{key}.{part}" if key else part
-            model = info.annotation
+            owner, parent, model = model, node, info.annotation
+            node = dict(node).get(part) if isinstance(node, (dict, BaseModel)) else None
         elif kind == "extra_forbidden" and part == loc[-1]:  # the unknown key itself
             key = f"{key}.{part}" if key else part
     if kind == "extra_forbidden":
         return f"unknown key `{key}` in params; expected one of: {', '.join(sorted(model.model_fields))}"
-    if kind == "bound":
-        parent = tuple_key.rpartition(".")[0]
-        other = f"{parent}.{ctx['other']}" if parent else ctx["other"]
-        return (f"`{tuple_key}` must be {_range(info, Bound(ctx['op'], ctx['other']), ctx['limit'])} "
-                f"({_OP_WORDS[ctx['op']]} `{other}`), got {ctx['value']!r}")
-    if kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
-        return f"`{key}` must be {_range(info)}, got {value!r}"
+    if kind in ("bound", "greater_than", "greater_than_equal", "less_than", "less_than_equal"):
+        bound = next((b for b in info.metadata if isinstance(b, Bound)), None)
+        if bound is None:
+            return f"`{key}` must be in {_range(info)}, got {value!r}"
+        prefix = tuple_key.rpartition(".")[0]
+        given = dict(parent) if isinstance(parent, (dict, BaseModel)) else {}
+        limit = ctx["limit"] if kind == "bound" else given.get(bound.other, owner.model_fields[bound.other].default)
+        value = ctx["value"] if kind == "bound" else value
+        side = "upper" if bound.op == "<=" else "lower"
+        return (f"`{tuple_key}` must be in {_range(info, bound, limit)}, got {value!r} (the {side} limit is "
+                f"`{prefix + '.' if prefix else ''}{bound.other}`)")
     if kind == "literal_error":
         return f"`{key}` must be one of {_choices(info.annotation)}, got {value!r}"
     if kind in ("missing", "too_short", "too_long") and info is not None:
@@ -223,7 +235,7 @@ def from_mapping(cls: type[T], mapping: Any, section: str) -> T:
     try:
         return cls.model_validate(data)
     except ValidationError as exc:
-        raise InputError(_message(cls, exc, section)) from exc
+        raise InputError(_message(cls, exc, section, data)) from exc
 
 
 def read_params_file(path: str | os.PathLike = "params.yaml") -> dict:
