@@ -3,18 +3,25 @@
 Each stage's parameters are one model (a :class:`Section`) whose field names are exactly the keys of its
 ``params.yaml`` section. Every default, range and choice is declared once, on its field: ``Field(ge=..., le=...)``
 for a range, ``Literal[...]`` for a choice, and :class:`Bound` for a limit set by another field of the same section
-(``canny_high`` >= ``canny_low``). The CLI reuses the defaults; a test checks that ``params.yaml`` agrees. Unknown,
-mistyped or out-of-range keys are refused with an :class:`~cvpipe.errors.InputError` of one line that names the dotted
-key and what it accepts; the same check runs when Python code builds a model directly (the message then names the
-bare field). Types are strict: ``true`` is not a number and ``"3"`` is not a number, but ``3`` is accepted for a
-float field (pydantic's strict mode allows exactly that conversion).
+(``canny_high`` >= ``canny_low``). The CLI reuses the defaults; a test checks that ``params.yaml`` agrees, and the
+message tests are generated from these declarations. Unknown, mistyped or out-of-range keys are refused with an
+:class:`~cvpipe.errors.InputError` of one line that names the dotted key and what it accepts (```hough.lines.rho`
+must be in (0.0, 100.0], got -1``); the same check runs when Python code builds a model directly, and the message
+then names the bare field. Types are strict: ``true`` and ``"3"`` are not numbers, ``3.0`` is not an integer, but
+``3`` is accepted for a float field (and stored as ``3.0``).
 
-A new section is a :class:`Section` subclass plus one ``SECTIONS`` entry::
+A new section is a :class:`Section` subclass, one ``SECTIONS`` entry and the same keys in ``params.yaml``::
 
     class HoughEdgesParams(Section):
         canny_low: float = Field(50.0, ge=0.0)
         canny_high: Annotated[float, Bound(">=", "canny_low")] = 150.0
         aperture: Literal[3, 5, 7] = 3
+        l2_gradient: bool = False
+
+    SECTIONS.update({"hough.edges": HoughEdgesParams})
+
+Copies with changes go through :func:`replace` (validated; ``model_copy(update=...)`` would skip the checks), dicts
+through ``model_dump()``.
 """
 
 from __future__ import annotations
