@@ -374,15 +374,15 @@ def test_canny_edges_input_and_blur():
 
 
 @pytest.mark.parametrize("cls, mapping, message", [
-    (HoughEdgesParams, {"canny_low": 200.0}, r"`canny_high` must be in \[200.0"),
-    (HoughEdgesParams, {"aperture": 4}, r"`aperture` must be one of \[3, 5, 7\]"),
-    (HoughEdgesParams, {"blur_sigma": -1.0}, r"`blur_sigma` must be in \[0.0"),
-    (HoughLinesParams, {"rho": 0.0}, r"`rho` must be in \(0.0"),
-    (HoughLinesParams, {"theta_deg": 0.0}, r"`theta_deg` must be in \(0.0"),
-    (HoughLinesParams, {"threshold": 0}, r"`threshold` must be in \[1"),
-    (HoughLinesParams, {"repeats": 0}, r"`repeats` must be in \[1, 100\]"),
-    (HoughReportParams, {"rho_tol": 0.0}, r"`rho_tol` must be in \(0.0"),
-    (HoughReportParams, {"theta_tol_deg": 95.0}, r"`theta_tol_deg` must be in \(0.0, 90.0\]"),
+    (HoughEdgesParams, {"canny_low": 200.0}, r"`hough\.x\.canny_high` must be in \[200.0"),
+    (HoughEdgesParams, {"aperture": 4}, r"`hough\.x\.aperture` must be one of \[3, 5, 7\]"),
+    (HoughEdgesParams, {"blur_sigma": -1.0}, r"`hough\.x\.blur_sigma` must be in \[0.0"),
+    (HoughLinesParams, {"rho": 0.0}, r"`hough\.x\.rho` must be in \(0.0"),
+    (HoughLinesParams, {"theta_deg": 0.0}, r"`hough\.x\.theta_deg` must be in \(0.0"),
+    (HoughLinesParams, {"threshold": 0}, r"`hough\.x\.threshold` must be in \[1"),
+    (HoughLinesParams, {"repeats": 0}, r"`hough\.x\.repeats` must be in \[1, 100\]"),
+    (HoughReportParams, {"rho_tol": 0.0}, r"`hough\.x\.rho_tol` must be in \(0.0"),
+    (HoughReportParams, {"theta_tol_deg": 95.0}, r"`hough\.x\.theta_tol_deg` must be in \(0.0, 90.0\]"),
 ])
 def test_params_validation(cls, mapping, message):
     with pytest.raises(InputError, match=message):
