@@ -12,13 +12,13 @@ from cvpipe.errors import EstimationError, InputError
 from cvpipe.homography import (
     METHODS,
     HomographyFit,
-    _minimal_solve,
     dlt,
     estimate,
     find_homography,
     hartley_normalization,
     transform_points,
 )
+from cvpipe.homography._ransac_kernels import _minimal_solve
 from cvpipe.metrics import corner_error, image_corners
 
 W, H_IMG = 640, 480
