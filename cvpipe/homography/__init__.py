@@ -29,7 +29,7 @@ chance), :mod:`~cvpipe.homography.dlt`, :mod:`~cvpipe.homography.match` (``corre
 """
 
 from ..geometry import hartley_normalization
-from ._kernels import _cholesky_solve  # noqa: F401  (cvpipe.panorama's SPD solve until it has its own)
+from ._kernels import solve_spd
 from .dlt import dlt, transform_points
 from .estimate import (
     DEFAULT_MAX_ITERS,
@@ -55,9 +55,12 @@ from .report import (
     report_summary,
 )
 
+#: the former private name, still imported by cvpipe.panorama until it uses ``solve_spd``
+_cholesky_solve = solve_spd
+
 __all__ = [
     "DEFAULT_MAX_ITERS", "MAX_NFA", "METHODS", "HomographyFit", "alignment_checkerboard", "alignment_panel",
     "chance_probability", "check_significant", "compare_methods", "correspondences", "dlt", "estimate",
     "find_homography", "hartley_normalization", "log10_nfa", "metric_key", "metrics_of", "picture_panels",
-    "points_area", "quality_plots", "report_summary", "transform_points",
+    "points_area", "quality_plots", "report_summary", "solve_spd", "transform_points",
 ]

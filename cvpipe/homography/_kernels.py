@@ -34,48 +34,84 @@ def _similarity(s, tx, ty):
     return T
 
 
-@njit(cache=True, error_model="numpy")
-def _msac(src, dst, H, thr2, bail):
-    """(MSAC cost, inlier count) of H; stops early (count -1) once the cost exceeds ``bail``."""
-    h0, h1, h2, h3, h4, h5, h6, h7, h8 = (H[0, 0], H[0, 1], H[0, 2], H[1, 0], H[1, 1], H[1, 2],
-                                          H[2, 0], H[2, 1], H[2, 2])
-    cost = 0.0
-    cnt = 0
-    for i in range(src.shape[0]):
-        x = src[i, 0]
-        y = src[i, 1]
-        w = h6 * x + h7 * y + h8
-        if w != 0.0:
-            iw = 1.0 / w
-            du = (h0 * x + h1 * y + h2) * iw - dst[i, 0]
-            dv = (h3 * x + h4 * y + h5) * iw - dst[i, 1]
-            e2 = du * du + dv * dv
-        else:
-            e2 = np.inf
-        if e2 <= thr2:
-            cost += e2
-            cnt += 1
-        else:
-            cost += thr2
-        if cost > bail:
-            return cost, -1
-    return cost, cnt
+@njit(cache=True, inline="always", error_model="numpy")
+def _sq_error(H, x, y, u, v):
+    """Squared one-sided reprojection error ``|| dehom(H [x, y, 1]) - (u, v) ||^2`` (inf when mapped to infinity):
+    the one reprojection loop body of the estimator (scoring, least-squares masks, refinement cost)."""
+    w = H[2, 0] * x + H[2, 1] * y + H[2, 2]
+    if w == 0.0:
+        return np.inf
+    du = (H[0, 0] * x + H[0, 1] * y + H[0, 2]) / w - u
+    dv = (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w - v
+    return du * du + dv * dv
 
 
 @njit(cache=True, error_model="numpy")
 def _sq_errors(src, dst, H, out):
     """Squared one-sided reprojection error per correspondence (inf when mapped to infinity)."""
     for i in range(src.shape[0]):
-        x = src[i, 0]
-        y = src[i, 1]
-        w = H[2, 0] * x + H[2, 1] * y + H[2, 2]
-        if w != 0.0:
-            du = (H[0, 0] * x + H[0, 1] * y + H[0, 2]) / w - dst[i, 0]
-            dv = (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w - dst[i, 1]
-            out[i] = du * du + dv * dv
-        else:
-            out[i] = np.inf
+        out[i] = _sq_error(H, src[i, 0], src[i, 1], dst[i, 0], dst[i, 1])
     return out
+
+
+@njit(cache=True, error_model="numpy")
+def _score(src, dst, H, thr2, bail, A, eps, delta):
+    """Evaluate H point by point: (MSAC cost, inliers so far, points evaluated, status).
+
+    status 0: all points evaluated; 1: rejected by the SPRT (likelihood ratio above A); 2: the MSAC cost already
+    exceeds ``bail`` (the best cost so far), so H cannot win. With ``bail = A = inf``: the plain MSAC cost.
+    """
+    up = delta / eps
+    down = (1.0 - delta) / (1.0 - eps)
+    lam = 1.0
+    cost = 0.0
+    cnt = 0
+    n = src.shape[0]
+    for i in range(n):
+        e2 = _sq_error(H, src[i, 0], src[i, 1], dst[i, 0], dst[i, 1])
+        if e2 <= thr2:
+            cost += e2
+            cnt += 1
+            lam *= up
+        else:
+            cost += thr2
+            lam *= down
+            if lam > A:
+                return cost, cnt, i + 1, 1
+            if cost > bail:
+                return cost, cnt, i + 1, 2
+    return cost, cnt, n, 0
+
+
+@njit(cache=True, error_model="numpy")
+def _hartley(p, mask):
+    """Hartley normalization of the points ``p[mask]``: (count, centroid x, centroid y, scale).
+
+    The scale sqrt(2) / mean distance to the centroid moves the mean distance to sqrt(2); it is ``inf`` when the
+    points coincide (callers test ``scale < inf``). The normalized point is ``((x - cx) * s, (y - cy) * s)``.
+    """
+    n = 0
+    cx = cy = 0.0
+    for i in range(p.shape[0]):
+        if mask[i]:
+            n += 1
+            cx += p[i, 0]
+            cy += p[i, 1]
+    cx /= n
+    cy /= n
+    d = 0.0
+    for i in range(p.shape[0]):
+        if mask[i]:
+            d += math.sqrt((p[i, 0] - cx) ** 2 + (p[i, 1] - cy) ** 2)
+    return n, cx, cy, math.sqrt(2.0) * n / d
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _denormalize(Hn, Ts, Tdi, tmp, out):
+    """``out = Tdi @ Hn @ Ts`` (``tmp``: 3x3 scratch): a model between normalized coordinates back in pixels (or,
+    given ``Tsi`` and ``Td``, a pixel model in normalized coordinates)."""
+    _matmul3(Hn, Ts, tmp)
+    _matmul3(Tdi, tmp, out)
 
 
 @njit(cache=True, error_model="numpy")
@@ -85,23 +121,11 @@ def _normalize(p):
     ``not_collinear`` is False when the smaller principal axis of the points is below ``_ALL_COLLINEAR_EPS`` times
     the larger one (computed from the 2x2 covariance: ratio of eigenvalues <= eps^2), or all points coincide.
     """
-    n = p.shape[0]
-    cx = 0.0
-    cy = 0.0
-    for i in range(n):
-        cx += p[i, 0]
-        cy += p[i, 1]
-    cx /= n
-    cy /= n
-    md = 0.0
-    for i in range(n):
-        md += math.sqrt((p[i, 0] - cx) ** 2 + (p[i, 1] - cy) ** 2)
-    md /= n
+    n, cx, cy, s = _hartley(p, np.ones(p.shape[0], np.bool_))
     T = np.eye(3)
     out = np.empty((n, 2))
-    if not md > 0.0:
+    if not s < np.inf:
         return T, out, False
-    s = math.sqrt(2.0) / md
     a = b = c = 0.0
     for i in range(n):
         x = (p[i, 0] - cx) * s
@@ -179,8 +203,17 @@ def _jacobi_eigh(M, V):
 
 
 @njit(cache=True, error_model="numpy")
-def _cholesky_solve(A, b, x):
-    """Solve A x = b for a symmetric positive definite A (n x n) by Cholesky; False if A is not positive definite."""
+def solve_spd(A, b, x):
+    """Solve A x = b for a symmetric positive definite A (n x n) by Cholesky into ``x``; False if A is not positive
+    definite. The one SPD solve of the Levenberg-Marquardt steps (homography refinement, panorama adjustment).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> x = np.empty(2)
+    >>> solve_spd(np.array([[4.0, 2.0], [2.0, 3.0]]), np.array([2.0, 1.0]), x), x.tolist()
+    (True, [0.5, 0.0])
+    """
     n = A.shape[0]
     L = np.zeros((n, n))
     for j in range(n):
@@ -212,14 +245,16 @@ def _cholesky_solve(A, b, x):
 @njit(cache=True, error_model="numpy")
 def _lm_cost(p, xs, ys, us, vs, ws):
     """Weighted sum of squared one-sided reprojection errors of the 8-parameter homography p (H[2, 2] = 1)."""
+    H = np.empty((3, 3))
+    for k in range(8):
+        H[k // 3, k % 3] = p[k]
+    H[2, 2] = 1.0
     c = 0.0
     for i in range(xs.shape[0]):
-        w = p[6] * xs[i] + p[7] * ys[i] + 1.0
-        if w == 0.0:
+        e2 = _sq_error(H, xs[i], ys[i], us[i], vs[i])
+        if e2 == np.inf:
             return np.inf
-        du = (p[0] * xs[i] + p[1] * ys[i] + p[2]) / w - us[i]
-        dv = (p[3] * xs[i] + p[4] * ys[i] + p[5]) / w - vs[i]
-        c += ws[i] * (du * du + dv * dv)
+        c += ws[i] * e2
     return c
 
 
@@ -227,30 +262,12 @@ def _lm_cost(p, xs, ys, us, vs, ws):
 def _lsq(src, dst, mask):
     """Hartley-normalized DLT on the masked correspondences via the 9x9 normal matrix; (H, ok)."""
     H = np.zeros((3, 3))
-    n = 0
-    cx = cy = cX = cY = 0.0
-    for i in range(src.shape[0]):
-        if mask[i]:
-            n += 1
-            cx += src[i, 0]
-            cy += src[i, 1]
-            cX += dst[i, 0]
-            cY += dst[i, 1]
+    n, cx, cy, ss = _hartley(src, mask)
     if n < 4:
         return H, False
-    cx /= n
-    cy /= n
-    cX /= n
-    cY /= n
-    ds = dd = 0.0
-    for i in range(src.shape[0]):
-        if mask[i]:
-            ds += math.sqrt((src[i, 0] - cx) ** 2 + (src[i, 1] - cy) ** 2)
-            dd += math.sqrt((dst[i, 0] - cX) ** 2 + (dst[i, 1] - cY) ** 2)
-    if ds <= 0.0 or dd <= 0.0:
+    _, cX, cY, sd = _hartley(dst, mask)
+    if not (ss < np.inf and sd < np.inf):
         return H, False
-    ss = math.sqrt(2.0) * n / ds
-    sd = math.sqrt(2.0) * n / dd
     # A^T A of the DLT rows [p, 0, -u p], [0, p, -v p] with p = (x, y, 1) has the block structure
     # [[S, 0, -Su], [0, S, -Sv], [-Su, -Sv, Suv]] with S = sum p p^T, Su = sum u p p^T, Sv = sum v p p^T,
     # Suv = sum (u^2 + v^2) p p^T: 24 sums per point instead of 162 products
@@ -296,12 +313,7 @@ def _lsq(src, dst, mask):
     Hn = np.empty((3, 3))
     for k in range(9):
         Hn[k // 3, k % 3] = V[k, 0]
-    # H = inv(Td) @ Hn @ Ts
-    Ts = _similarity(ss, -ss * cx, -ss * cy)
-    Tdi = _similarity(1.0 / sd, cX, cY)
-    tmp = np.empty((3, 3))
-    _matmul3(Hn, Ts, tmp)
-    _matmul3(Tdi, tmp, H)
+    _denormalize(Hn, _similarity(ss, -ss * cx, -ss * cy), _similarity(1.0 / sd, cX, cY), np.empty((3, 3)), H)
     if H[2, 2] != 0.0:
         H /= H[2, 2]
     return H, True
@@ -316,26 +328,9 @@ def _lm_refine(src, dst, weight, H0, max_iter):
     (H in pixels, weighted sum of squared errors in pixels^2).
     """
     n_all = src.shape[0]
-    n = 0
-    cx = cy = cX = cY = 0.0
-    for i in range(n_all):
-        if weight[i] > 0.0:
-            n += 1
-            cx += src[i, 0]
-            cy += src[i, 1]
-            cX += dst[i, 0]
-            cY += dst[i, 1]
-    cx /= n
-    cy /= n
-    cX /= n
-    cY /= n
-    ds = dd = 0.0
-    for i in range(n_all):
-        if weight[i] > 0.0:
-            ds += math.sqrt((src[i, 0] - cx) ** 2 + (src[i, 1] - cy) ** 2)
-            dd += math.sqrt((dst[i, 0] - cX) ** 2 + (dst[i, 1] - cY) ** 2)
-    ss = math.sqrt(2.0) * n / ds
-    sd = math.sqrt(2.0) * n / dd
+    used = weight > 0.0
+    n, cx, cy, ss = _hartley(src, used)
+    _, cX, cY, sd = _hartley(dst, used)
     xs = np.empty(n)
     ys = np.empty(n)
     us = np.empty(n)
@@ -356,8 +351,7 @@ def _lm_refine(src, dst, weight, H0, max_iter):
     Tdi = _similarity(1.0 / sd, cX, cY)
     tmp = np.empty((3, 3))
     Hn = np.empty((3, 3))
-    _matmul3(H0, Tsi, tmp)
-    _matmul3(Td, tmp, Hn)
+    _denormalize(H0, Tsi, Td, tmp, Hn)
     if abs(Hn[2, 2]) < 1e-12:
         e = np.empty(n_all)
         _sq_errors(src, dst, H0, e)
@@ -423,7 +417,7 @@ def _lm_refine(src, dst, weight, H0, max_iter):
                 A[a, a] += lam * (JtJ[a, a] + 1e-12)
             for a in range(8):
                 negJtr[a] = -Jtr[a]
-            if not _cholesky_solve(A, negJtr, delta):
+            if not solve_spd(A, negJtr, delta):
                 lam *= 10.0
                 continue
             pn = p + delta
@@ -442,44 +436,32 @@ def _lm_refine(src, dst, weight, H0, max_iter):
         Hn[k // 3, k % 3] = p[k]
     Hn[2, 2] = 1.0
     H = np.empty((3, 3))
-    _matmul3(Hn, Ts, tmp)
-    _matmul3(Tdi, tmp, H)
+    _denormalize(Hn, Ts, Tdi, tmp, H)
     if H[2, 2] != 0.0:
         H /= H[2, 2]
     return H, cost / (sd * sd)
 
 
+#: the final refinement's loss is Tukey's biweight; hard inliers and a Cauchy-like loss were measured and rejected
+#: (BENCHMARKS.md, "homography": the final refinement paragraph)
 @njit(cache=True, error_model="numpy")
-def _weights(e2, thr2, loss, out):
-    """IRLS weights of the final refinement from squared residuals: 0 hard inliers (1 within the threshold),
-    1 Tukey biweight (1 - e2 / c^2)^2 with c = threshold, 2 Cauchy-like 1 / (1 + e2 / s^2) (s = threshold / 2)
-    within the threshold."""
+def _weights(e2, thr2, out):
+    """IRLS weights of the final refinement from squared residuals: Tukey's biweight (1 - e2 / c^2)^2 within
+    c^2 = ``thr2``, 0 beyond."""
     for i in range(e2.shape[0]):
         if e2[i] > thr2:
             out[i] = 0.0
-        elif loss == 0:
-            out[i] = 1.0
-        elif loss == 1:
+        else:
             r = 1.0 - e2[i] / thr2
             out[i] = r * r
-        else:
-            out[i] = 1.0 / (1.0 + 4.0 * e2[i] / thr2)
     return out
 
 
 @njit(cache=True, error_model="numpy")
-def _msac_cost(e2, thr2):
-    c = 0.0
-    for i in range(e2.shape[0]):
-        c += min(e2[i], thr2)
-    return c
-
-
-@njit(cache=True, error_model="numpy")
-def _finalize(src, dst, H0, thr2, refine, rounds, loss, wthr2):
-    """Inliers of H0 and, with ``refine``, up to ``rounds`` of weighted Levenberg-Marquardt (weights from the
-    residuals of the previous round, see ``_weights``); with hard inliers (loss 0) a round is kept only if the MSAC
-    cost does not grow. Returns (H, inlier mask, squared errors)."""
+def _finalize(src, dst, H0, thr2, refine, rounds, wthr2):
+    """Inliers of H0 and, with ``refine``, up to ``rounds`` of weighted Levenberg-Marquardt (Tukey weights cut
+    off at ``wthr2`` from the residuals of the previous round, see ``_weights``). Returns (H, inlier mask, squared
+    errors)."""
     n = src.shape[0]
     e2 = _sq_errors(src, dst, H0, np.empty(n))
     mask = np.empty(n, np.bool_)
@@ -490,11 +472,10 @@ def _finalize(src, dst, H0, thr2, refine, rounds, loss, wthr2):
     H = H0.copy()
     if not refine or cnt < 4:
         return H, mask, e2
-    cost = _msac_cost(e2, thr2)
     w = np.empty(n)
     e2r = np.empty(n)
     for _ in range(rounds):
-        _weights(e2, wthr2, loss, w)
+        _weights(e2, wthr2, w)
         used = 0
         for i in range(n):
             used += w[i] > 0.0
@@ -508,24 +489,15 @@ def _finalize(src, dst, H0, thr2, refine, rounds, loss, wthr2):
         if not finite:
             break
         _sq_errors(src, dst, Hr, e2r)
-        cost_r = _msac_cost(e2r, thr2)
-        if loss == 0 and cost_r > cost * (1.0 + 1e-9):
-            break
         cnt_r = 0
-        same = True
         for i in range(n):
-            m = e2r[i] <= thr2
-            cnt_r += m
-            same = same and (m == mask[i])
+            cnt_r += e2r[i] <= thr2
         if cnt_r < 4:
             break
         H = Hr
-        cost = cost_r
         for i in range(n):
             e2[i] = e2r[i]
             mask[i] = e2r[i] <= thr2
-        if same and loss == 0:
-            break
     return H, mask, e2
 
 

@@ -8,7 +8,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ._kernels import _lsq, _matmul3, _msac, _sq_errors
+from ._kernels import _denormalize, _lsq, _score, _sq_errors
 
 #: smallest |twice the triangle area| of a sample triple in Hartley-normalized coordinates (mean radius sqrt(2))
 _COLLINEAR_EPS = 1e-5
@@ -124,34 +124,36 @@ def _minimal_solve(sn, dn, i0, i1, i2, i3, H):
     return True
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _refit(src, dst, H, t2, e2, mask):
+    """Least squares (normalized DLT) on the correspondences within ``sqrt(t2)`` of H: (H, ok)."""
+    _sq_errors(src, dst, H, e2)
+    for i in range(src.shape[0]):
+        mask[i] = e2[i] <= t2
+    return _lsq(src, dst, mask)
+
+
 @njit(cache=True, error_model="numpy")
 def _local_optimize(src, dst, H0, thr2, multiplier, steps, e2):
     """LO step: least squares on the inliers of H0, then iterative least squares while the threshold shrinks
     from ``multiplier * thr`` to ``thr``. Returns the best (H, MSAC cost, inliers) among H0 and the refits."""
     n = src.shape[0]
     best = H0.copy()
-    best_cost, best_cnt = _msac(src, dst, H0, thr2, np.inf)
+    best_cost, best_cnt, _, _ = _score(src, dst, H0, thr2, np.inf, np.inf, 0.5, 0.25)
     mask = np.empty(n, np.bool_)
     H = H0.copy()
     for rep in range(2):
-        _sq_errors(src, dst, H, e2)
-        for i in range(n):
-            mask[i] = e2[i] <= thr2
-        Hl, ok = _lsq(src, dst, mask)
+        Hl, ok = _refit(src, dst, H, thr2, e2, mask)
         if not ok:
             break
         H = Hl
         for s in range(steps):
             f = multiplier - (multiplier - 1.0) * s / max(steps - 1, 1)
-            t2 = thr2 * f * f
-            _sq_errors(src, dst, H, e2)
-            for i in range(n):
-                mask[i] = e2[i] <= t2
-            Hl, ok = _lsq(src, dst, mask)
+            Hl, ok = _refit(src, dst, H, thr2 * f * f, e2, mask)
             if not ok:
                 break
             H = Hl
-        cost, cnt = _msac(src, dst, H, thr2, np.inf)
+        cost, cnt, _, _ = _score(src, dst, H, thr2, np.inf, np.inf, 0.5, 0.25)
         if cost < best_cost:
             best_cost = cost
             best_cnt = cnt
@@ -196,46 +198,6 @@ def _sprt_threshold(eps, delta, tm):
 
 
 @njit(cache=True, error_model="numpy")
-def _score(src, dst, H, thr2, bail, A, eps, delta):
-    """Evaluate H point by point: (MSAC cost, inliers so far, points evaluated, status).
-
-    status 0: all points evaluated; 1: rejected by the SPRT (likelihood ratio above A); 2: the MSAC cost already
-    exceeds ``bail`` (the best cost so far), so H cannot win.
-    """
-    h0, h1, h2, h3, h4, h5, h6, h7, h8 = (H[0, 0], H[0, 1], H[0, 2], H[1, 0], H[1, 1], H[1, 2],
-                                          H[2, 0], H[2, 1], H[2, 2])
-    up = delta / eps
-    down = (1.0 - delta) / (1.0 - eps)
-    lam = 1.0
-    cost = 0.0
-    cnt = 0
-    n = src.shape[0]
-    for i in range(n):
-        x = src[i, 0]
-        y = src[i, 1]
-        w = h6 * x + h7 * y + h8
-        if w != 0.0:
-            iw = 1.0 / w
-            du = (h0 * x + h1 * y + h2) * iw - dst[i, 0]
-            dv = (h3 * x + h4 * y + h5) * iw - dst[i, 1]
-            e2 = du * du + dv * dv
-        else:
-            e2 = np.inf
-        if e2 <= thr2:
-            cost += e2
-            cnt += 1
-            lam *= up
-        else:
-            cost += thr2
-            lam *= down
-            if lam > A:
-                return cost, cnt, i + 1, 1
-            if cost > bail:
-                return cost, cnt, i + 1, 2
-    return cost, cnt, n, 0
-
-
-@njit(cache=True, error_model="numpy")
 def _collapsed(Hn):
     """True when the normalized model is nearly singular (see ``_MIN_CONDITION``)."""
     det = (Hn[0, 0] * (Hn[1, 1] * Hn[2, 2] - Hn[1, 2] * Hn[2, 1])
@@ -270,8 +232,7 @@ def _ransac_chunk(src, dst, sn, dn, Ts, Tdi, Tsi, Td, u, thr2, log1mconf, max_it
             state[4] += 1
             continue
         state[3] += 1
-        _matmul3(Hn, Ts, tmp)
-        _matmul3(Tdi, tmp, H)
+        _denormalize(Hn, Ts, Tdi, tmp, H)
         cost, cnt, seen, status = _score(src, dst, H, thr2, state[0], state[8], state[6], state[7])
         if status != 0 or cost >= state[0]:
             if status != 1:
@@ -291,8 +252,7 @@ def _ransac_chunk(src, dst, sn, dn, Ts, Tdi, Tsi, Td, u, thr2, log1mconf, max_it
         if lo and cnt >= 8:
             Hb, cost_b, cnt_b = _local_optimize(src, dst, H, thr2, lo_multiplier, lo_steps, e2)
             state[5] += 1
-            _matmul3(Hb, Tsi, tmp)
-            _matmul3(Td, tmp, Hn)
+            _denormalize(Hb, Tsi, Td, tmp, Hn)
             if cost_b < cost and not _collapsed(Hn):
                 H[:, :] = Hb
                 cost = cost_b

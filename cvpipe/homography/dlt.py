@@ -6,7 +6,7 @@ import numpy as np
 
 from ..errors import EstimationError, InputError
 from ..geometry import apply_homography, as_points, collinear, hartley_normalization
-from ._kernels import _ALL_COLLINEAR_EPS
+from ._kernels import _ALL_COLLINEAR_EPS, _denormalize
 
 #: map points through a homography (the name this package has always exported)
 transform_points = apply_homography
@@ -63,6 +63,16 @@ def dlt(src, dst, weights=None) -> np.ndarray:
         Bad shapes, fewer than 4 points, NaN/inf, bad weights.
     EstimationError
         All points collinear, or the system is rank-deficient.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cvpipe.homography import dlt
+    >>> src = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    >>> dlt(src, 2.0 * src + 1.0).round(12) + 0.0
+    array([[2., 0., 1.],
+           [0., 2., 1.],
+           [0., 0., 1.]])
     """
     s, d = _check_pair(src, dst)
     _check_not_collinear("src", s)
@@ -92,6 +102,6 @@ def dlt(src, dst, weights=None) -> np.ndarray:
     # rank 8 is needed for a unique solution: the 8th singular value must not vanish
     if sv[7] <= 1e-12 * sv[0]:
         raise EstimationError("the DLT system is rank-deficient (degenerate configuration); supply more spread points")
-    Hn = vt[-1].reshape(3, 3)
-    H = np.linalg.solve(Td, Hn @ Ts)
+    H = np.empty((3, 3))
+    _denormalize(np.ascontiguousarray(vt[-1].reshape(3, 3)), Ts, np.linalg.inv(Td), np.empty((3, 3)), H)
     return _unit_h22(H)

@@ -21,13 +21,11 @@ DEFAULT_MAX_ITERS = 10_000
 #: initial SPRT guesses: inlier ratio of a good model and consistent fraction of a bad one (both re-estimated)
 _SPRT_EPS0 = 0.05
 _SPRT_DELTA0 = 0.01
-#: final refinement: IRLS rounds, loss (see ``_weights``: 1 = Tukey biweight) and its cut-off relative to the
-#: threshold. The threshold bounds the noise of an inlier, but real matches (SIFT under viewpoint change) have
+#: final refinement: IRLS rounds and the cut-off of its Tukey weights (see ``_weights``) relative to the threshold. The threshold bounds the noise of an inlier, but real matches (SIFT under viewpoint change) have
 #: heavier tails: a smooth redescending weight over 3x the threshold (weight 0.79 at the threshold, 0.31 at twice
 #: it) gave lower corner errors on the Oxford/CMP pairs than hard inliers (see BENCHMARKS.md), like MAGSAC++'s
 #: marginalisation over the noise scale; the returned inlier mask still uses the threshold itself.
 _FINAL_ROUNDS = 3
-_FINAL_LOSS = 1
 _FINAL_WSCALE = 3.0
 #: a model is accepted only when its number of false alarms is below this (a-contrario, Moisan & Stival's ORSA: an
 #: NFA < 1 means fewer than one model this good is expected from matches that are pure chance)
@@ -85,6 +83,12 @@ def log10_nfa(inliers: int, matches: int, p: float) -> float:
     -------
     float
         ``log10 NFA``; below ``log10(MAX_NFA) = 0`` the count is significant. ``inf`` for fewer than 4 of either.
+
+    Examples
+    --------
+    >>> from cvpipe.homography import log10_nfa
+    >>> log10_nfa(40, 100, 0.01) < 0 < log10_nfa(6, 100, 0.01)  # 40 of 100 agree: no chance; 6: chance
+    True
     """
     from scipy.special import bdtrc, gammaln
 
@@ -178,6 +182,15 @@ def check_significant(fit: HomographyFit, src, dst, threshold: float, area: floa
     ------
     EstimationError
         ``NFA >= MAX_NFA``: as many inliers are expected from unrelated matches; the message has the counts.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cvpipe.homography import check_significant, find_homography
+    >>> src = np.random.default_rng(2).uniform(0, 500, (50, 2))
+    >>> fit = find_homography(src, src + 7.0, rng=0)  # a translation: every match is an inlier
+    >>> bool(check_significant(fit, src, src + 7.0, threshold=3.0).log10_nfa < 0)
+    True
     """
     s, d = as_points("src", src), as_points("dst", dst)
     inl = np.asarray(fit.inliers, bool)
@@ -252,6 +265,18 @@ def find_homography(
     EstimationError
         All points collinear, every sample degenerate, no model with at least 4 inliers, or an inlier count that
         chance explains (NFA >= 1); raise ``threshold`` or ``max_iters``, or supply better matches.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cvpipe.homography import find_homography, transform_points
+    >>> H_true = np.array([[1.1, 0.02, 5.0], [-0.03, 0.95, -2.0], [1e-4, 2e-4, 1.0]])
+    >>> src = np.random.default_rng(0).uniform(0, 500, (40, 2))
+    >>> dst = transform_points(H_true, src)
+    >>> dst[:5] += 60.0  # five outliers
+    >>> fit = find_homography(src, dst, rng=0)
+    >>> fit.num_inliers, bool(np.allclose(fit.H, H_true, atol=1e-6))
+    (35, True)
     """
     s, d = _check_pair(src, dst)
     _check_area(area)
@@ -302,9 +327,9 @@ def find_homography(
             f"all {attempts} sampled 4-point sets were degenerate (collinear or orientation-flipping); "
             "the correspondences are nearly collinear or inconsistent"
         )
-    H, mask, e2 = _finalize(s, d, best_H, thr2, bool(refine), _FINAL_ROUNDS, _FINAL_LOSS, thr2 * _FINAL_WSCALE ** 2)
+    H, mask, e2 = _finalize(s, d, best_H, thr2, bool(refine), _FINAL_ROUNDS, thr2 * _FINAL_WSCALE ** 2)
     if refine and _collapsed(Td @ H @ Tsi):  # the refinement drifted to a degenerate model: keep RANSAC's
-        H, mask, e2 = _finalize(s, d, best_H, thr2, False, 0, _FINAL_LOSS, thr2)
+        H, mask, e2 = _finalize(s, d, best_H, thr2, False, 0, thr2)
     if mask.sum() < 4:
         raise EstimationError(
             f"no homography with at least 4 inliers within {threshold} px after {iterations} iterations; "
@@ -373,6 +398,19 @@ def estimate(method: str, src, dst, **kwargs) -> HomographyFit:
     This is the path of the ``cvpipe homography`` command and the pipeline's estimate stage: every method's model
     must be significant against chance (:func:`check_significant`, with ``area`` or the bounding box of ``dst``),
     and 4 matches, which any homography fits exactly, are not enough to tell (EstimationError).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cvpipe.homography import estimate, transform_points
+    >>> src = np.random.default_rng(1).uniform(0, 500, (30, 2))
+    >>> dst = transform_points([[1.0, 0.1, 3.0], [0.0, 1.2, -4.0], [0.0, 1e-4, 1.0]], src)
+    >>> estimate("opencv_ransac", src, dst).num_inliers
+    30
+    >>> estimate("ours", src[:4], dst[:4])
+    Traceback (most recent call last):
+    ...
+    cvpipe.errors.EstimationError: only 4 matches: a homography fits any 4 exactly, so this one cannot be told from chance; supply more matches (more features, a larger ratio)
     """
     try:
         fn = METHODS[method]

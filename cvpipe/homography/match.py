@@ -20,6 +20,15 @@ def correspondences(gray_a: np.ndarray, gray_b: np.ndarray, detector: str = "sif
     -------
     src, dst : (M, 2) float64
         Matched keypoint positions in A and in B (pixels), best descriptor distance first.
+
+    Examples
+    --------
+    >>> import numpy as np, skimage.data
+    >>> from cvpipe.homography import correspondences
+    >>> gray = skimage.data.camera()
+    >>> src, dst = correspondences(gray, np.roll(gray, 10, axis=1), max_features=500)
+    >>> bool(np.median(dst[:, 0] - src[:, 0]) == 10.0)
+    True
     """
     from .. import features, matching
 

@@ -27,6 +27,14 @@ def alignment_checkerboard(img_a: np.ndarray, img_b: np.ndarray, H_ab, tiles: in
     (Ha, Wa, 3) uint8 BGR
         Dark squares where the warped B does not cover A. Straight edges that continue across squares mean a
         good alignment; steps at square borders are the residual error.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cvpipe.homography import alignment_checkerboard
+    >>> a = np.zeros((40, 60, 3), np.uint8)
+    >>> alignment_checkerboard(a, a + 255, np.eye(3), tiles=2).shape
+    (40, 60, 3)
     """
     import cv2
 
@@ -115,6 +123,15 @@ def compare_methods(pairs: list[dict], runs: dict, success_px: float = 3.0) -> d
         ``failures``, ``median_inliers`` (when any estimate) and, when any pair has truth, ``truth_pairs``,
         ``pairs_within``, ``success_rate``, ``median_corner_error_px`` (a failure counts as infinite; omitted when
         infinite) and ``mean_corner_error_px`` (over the successes; omitted without one)).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cvpipe.homography import compare_methods
+    >>> pairs = [{"name": "p", "matches": 50, "size_a": [100, 80], "H": np.eye(3)}]
+    >>> runs = {"ours": {"pairs": {"p": {"H": np.eye(3), "inliers": 45}}, "dropped": []}}
+    >>> compare_methods(pairs, runs)["all"]["ours"]["success_rate"]
+    1.0
     """
     from ..metrics import corner_error
 
