@@ -96,7 +96,10 @@ def kernels_cached(*dispatchers) -> bool:
 
 def numba_kernels(module) -> list:
     """The numba dispatchers defined in ``module`` that are compiled on their own (``inline="always"`` ones are
-    compiled into their callers and never cached by themselves)."""
+    compiled into their callers and never cached by themselves); for a package, those of its loaded submodules."""
+    if hasattr(module, "__path__"):
+        subs = [m for n, m in sorted(sys.modules.items()) if n.startswith(module.__name__ + ".")]
+        return [k for m in subs for k in numba_kernels(m)]
     return [v for v in vars(module).values()
             if hasattr(v, "_cache") and hasattr(v, "py_func") and getattr(v, "__module__", None) == module.__name__
             and getattr(v, "targetoptions", {}).get("inline") != "always"]

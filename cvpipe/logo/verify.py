@@ -13,13 +13,21 @@ from scipy.stats import binom
 
 from ..errors import EstimationError
 from ..features import Features
-from ..geometry import apply_homography
+from ..geometry import apply_homography as _map_points
 from ..homography import find_homography
 from ..params import LogoVerifyParams
 
 if TYPE_CHECKING:
     from .gallery import Gallery, Reference
     from .match import Matches
+
+
+def _mapped(H, pts):
+    """``pts`` mapped by ``H``; a point sent to infinity means the fit is implausible (EstimationError)."""
+    out = _map_points(H, pts)
+    if not np.isfinite(out).all():
+        raise EstimationError("a point maps to infinity")
+    return out
 
 
 @dataclass(frozen=True)
@@ -98,7 +106,7 @@ def shape_problem(H: np.ndarray, corners: np.ndarray, scene_size: tuple[int, int
     w = np.c_[corners, np.ones(4)] @ np.asarray(H, np.float64)[2]
     if np.any(w <= 1e-9):
         return "outline crosses the horizon"
-    quad = apply_homography(H, corners)
+    quad = _mapped(H, corners)
     edges = np.roll(quad, -1, axis=0) - quad
     cross = edges[:, 0] * np.roll(edges, -1, axis=0)[:, 1] - edges[:, 1] * np.roll(edges, -1, axis=0)[:, 0]
     # the reference outline turns clockwise on screen (y down) = positive cross products; negative means mirrored
@@ -310,7 +318,7 @@ def _check(brand: str, r: int, ref: Reference, H: np.ndarray, inl: np.ndarray, s
     n_matches = len(np.unique(s_idx))
     pairs = np.c_[g_idx[keep], s_idx[keep]]
     reason = shape_problem(H, ref.outline, scene_size, p)
-    quad = None if reason.startswith("outline crosses") else apply_homography(H, ref.outline)
+    quad = None if reason.startswith("outline crosses") else _mapped(H, ref.outline)
     if not reason and n_in < p.min_inliers:
         reason = f"{n_in} inliers < {p.min_inliers}"
     if not reason:
