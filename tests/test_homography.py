@@ -404,8 +404,7 @@ def test_many_to_one_cluster_does_not_win_with_a_collapsed_model(seed):
 
 
 @pytest.mark.parametrize("name", ["cvpipe.geometry", "cvpipe.homography.dlt", "cvpipe.homography.estimate",
-                                  "cvpipe.homography.match", "cvpipe.homography.report",
-                                  "cvpipe.homography._kernels"])
+                                  "cvpipe.homography.match", "cvpipe.homography.report", "cvpipe.linalg"])
 def test_examples_in_docstrings_run(name):
     """The Examples sections of the public homography modules (and the shared geometry) are true."""
     import doctest
