@@ -510,7 +510,8 @@ def test_warm_cache_loads_kernels_without_numbas_compiler_setup(tmp_path):
 
 
 def test_kernel_loader_falls_back_to_numbas_call(monkeypatch):
-    """A failing cache read (here: a broken cache object) adds nothing and says so; the call then gives OpenCV's lines."""
+    """A failing cache read (here: a broken cache object) adds nothing and says so; the call then gives OpenCV's
+    lines."""
     from cvpipe.hough import _kernels
 
     class Broken:
@@ -543,3 +544,21 @@ def test_opencv_baseline_does_not_import_numba():
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=root)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip() == "False"
+
+
+# ------------------------------------------------------------------------------------------------ docstrings
+
+
+@pytest.mark.parametrize("name", ["transform", "probabilistic", "edges", "evaluate", "report"])
+def test_docstring_examples_run(name):
+    """Every public entry point of cvpipe.hough documents an Examples section, and the examples give what they say."""
+    import doctest
+    import importlib
+
+    module = importlib.import_module(f"cvpipe.hough.{name}")
+    public = [getattr(module, n) for n in module.__all__ if callable(getattr(module, n))
+              and not isinstance(getattr(module, n), type)]
+    missing = [f.__name__ for f in public if "Examples\n" not in (f.__doc__ or "")]
+    assert not missing, f"public functions of {module.__name__} without an Examples section: {missing}"
+    result = doctest.testmod(module, optionflags=doctest.NORMALIZE_WHITESPACE)
+    assert result.failed == 0 and result.attempted >= 2 * len(public)

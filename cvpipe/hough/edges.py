@@ -26,6 +26,17 @@ def canny_edges(gray: np.ndarray, low: float = 50.0, high: float = 150.0, *, ape
         Use the L2 gradient norm instead of L1.
     blur_sigma : float
         Gaussian sigma in pixels applied before Canny; 0 = none.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> gray = np.zeros((40, 40), np.uint8)
+    >>> gray[10:30, 10:30] = 200  # a bright square: its outline is the edge
+    >>> edges = canny_edges(gray, 50, 150)
+    >>> edges.dtype, np.unique(edges).tolist()
+    (dtype('uint8'), [0, 255])
+    >>> bool(edges[10:30, 10:30].any()) and not edges[15:25, 15:25].any()  # on the outline, not inside
+    True
     """
     if not isinstance(gray, np.ndarray) or gray.ndim != 2 or gray.size == 0 or gray.dtype != np.uint8:
         shape = getattr(gray, "shape", None)

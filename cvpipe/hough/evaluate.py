@@ -23,7 +23,14 @@ def _as_lines(lines: np.ndarray) -> np.ndarray:
 
 
 def line_cells(lines: np.ndarray, rho: float = 1.0, theta: float = np.pi / 180, min_theta: float = 0.0) -> np.ndarray:
-    """Accumulator cell (angle index, rho index relative to rho = 0) of each line, shape (N, 2) int64."""
+    """Accumulator cell (angle index, rho index relative to rho = 0) of each line, shape (N, 2) int64.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> line_cells([[20.0, np.pi / 2, 80], [-3.0, 0.0, 51]]).tolist()
+    [[90, 20], [0, -3]]
+    """
     lines = _as_lines(lines)
     rho32, theta32 = float(np.float32(rho)), float(np.float32(theta))
     n = np.rint((lines[:, 1] - float(np.float32(min_theta))) / theta32).astype(np.int64)
@@ -40,6 +47,14 @@ def cell_agreement(ours: np.ndarray, ref: np.ndarray, rho: float = 1.0, theta: f
     dict
         ``reproduced`` (count), ``ref_lines``, ``our_lines``, ``parity`` (reproduced / ref_lines; 1.0 when both are
         empty), ``same_votes`` (reproduced lines whose votes agree too), ``same_order`` (identical cell sequence).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ours = [[20.0, np.pi / 2, 80], [-3.0, 0.0, 51]]
+    >>> agree = cell_agreement(ours, [[20.0, np.pi / 2, 80]])
+    >>> agree["reproduced"], agree["parity"], agree["same_order"]
+    (1, 1.0, False)
     """
     ours, ref = _as_lines(ours), _as_lines(ref)
     a = line_cells(ours, rho, theta, min_theta)
@@ -79,6 +94,12 @@ def line_segment_matches(lines: np.ndarray, segments: np.ndarray, dist_px: float
     Returns
     -------
     ndarray, shape (M,), bool
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> line_segment_matches([[20.0, np.pi / 2]], [[0, 20, 79, 20], [5, 0, 5, 59]]).tolist()  # the row y = 20
+    [True, False]
     """
     segments = np.asarray(segments, np.float64).reshape(-1, 4)
     lines = np.asarray(lines, np.float64)
@@ -110,6 +131,11 @@ def segment_segment_matches(found: np.ndarray, segments: np.ndarray, dist_px: fl
     Returns
     -------
     ndarray, shape (M,), bool
+
+    Examples
+    --------
+    >>> segment_segment_matches([[0, 20, 79, 20]], [[10, 20, 60, 20], [5, 0, 5, 59]]).tolist()
+    [True, False]
     """
     segments = np.asarray(segments, np.float64).reshape(-1, 4)
     found = np.asarray(found, np.float64).reshape(-1, 4)
@@ -142,6 +168,13 @@ def truth_matches(lines: np.ndarray, truth: np.ndarray, rho_tol: float = 3.0, th
 
     (rho, theta) and (-rho, theta - pi) are the same line, so lines near theta = 0 and theta = pi are compared both
     ways. Returns (M,) bool.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> lines = [[20.0, np.pi / 2, 80], [-10.0, np.pi - 0.01, 60]]
+    >>> truth_matches(lines, [[20.5, np.pi / 2], [10.0, 0.0], [40.0, 1.0]]).tolist()  # (10, 0) is (-10, pi)
+    [True, True, False]
     """
     truth = np.asarray(truth, np.float64).reshape(-1, 2)
     lines = np.asarray(lines, np.float64)
@@ -155,7 +188,13 @@ def truth_matches(lines: np.ndarray, truth: np.ndarray, rho_tol: float = 3.0, th
 
 
 def median_seconds(fn, repeats: int = 5, warmup: int = 1) -> float:
-    """Median wall time of ``fn()`` over ``repeats`` calls after ``warmup`` untimed calls, in seconds."""
+    """Median wall time of ``fn()`` over ``repeats`` calls after ``warmup`` untimed calls, in seconds.
+
+    Examples
+    --------
+    >>> median_seconds(lambda: sum(range(100)), repeats=3) >= 0
+    True
+    """
     for _ in range(warmup):
         fn()
     times = []
@@ -183,6 +222,17 @@ def compare_runs(ours: dict, opencv: dict, truth: dict | None = None, rho_tol: f
         ``per_image`` entries and the summary: ``parity_min``/``parity_mean`` (share of OpenCV's lines in the same
         cell), ``identical_images`` (same lines, votes and order) and, when any image has truth,
         ``recall_ours``/``recall_opencv`` (true lines found within the tolerances) and ``truth_images``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ours = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
+    ...         "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
+    >>> opencv = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
+    ...           "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
+    >>> compared = compare_runs(ours, opencv, {"a": [[20.0, np.pi / 2], [5.0, 0.0]]})
+    >>> compared["parity_min"], compared["identical_images"], compared["recall_ours"]
+    (1.0, 1, 0.5)
     """
     from pathlib import PurePath
 
@@ -215,7 +265,20 @@ def compare_runs(ours: dict, opencv: dict, truth: dict | None = None, rho_tol: f
 
 
 def metrics_of(compared: dict) -> dict:
-    """The flat numeric metrics of :func:`compare_runs` output, namespaced by image (``{"hough": {...}}``)."""
+    """The flat numeric metrics of :func:`compare_runs` output, namespaced by image (``{"hough": {...}}``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ours = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
+    ...         "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
+    >>> opencv = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
+    ...           "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
+    >>> compared = compare_runs(ours, opencv, {"a": [[20.0, np.pi / 2], [5.0, 0.0]]})
+    >>> m = metrics_of(compared)["hough"]
+    >>> sorted(m), m["a"]["identical"], m["all"]["recall_opencv"]
+    (['a', 'all'], 1, 0.5)
+    """
     summary = {k: v for k, v in compared.items() if k != "per_image"}
     per_image = {r["file"]: {k: (int(v) if isinstance(v, bool) else v) for k, v in r.items() if k != "file"}
                  for r in compared["per_image"]}

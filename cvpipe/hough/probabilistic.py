@@ -56,6 +56,14 @@ def hough_lines_probabilistic(
     -------
     ndarray, shape (K, 4), int32
         Segments ``[x1, y1, x2, y2]`` in pixels, in the order they were found.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> edges = np.zeros((60, 80), np.uint8)
+    >>> edges[20, :] = 255  # the row y = 20: theta = 90 deg, rho = 20 px, 80 pixels
+    >>> hough_lines_probabilistic(edges, threshold=20, min_line_length=30, rng=0).tolist()
+    [[0, 20, 79, 20]]
     """
     edges = _check_edges(edges)
     threshold = _check_int("threshold", threshold, 1)

@@ -15,7 +15,15 @@ __all__ = ["draw_lines", "draw_segments", "report_summary", "quality_plot"]
 
 def draw_lines(image: np.ndarray, lines: np.ndarray, color: tuple[int, int, int] = (0, 0, 255),
                thickness: int = 1) -> np.ndarray:
-    """A BGR copy of ``image`` with the infinite lines ``[rho, theta, ...]`` drawn across it."""
+    """A BGR copy of ``image`` with the infinite lines ``[rho, theta, ...]`` drawn across it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> out = draw_lines(np.zeros((60, 80), np.uint8), [[20.0, np.pi / 2, 80]])  # red across the row y = 20
+    >>> out.shape, int(out[20, 40].argmax()), int(out[40, 40].max())  # anti-aliased: red dominates on the row
+    ((60, 80, 3), 2, 0)
+    """
     out = to_bgr(image)
     reach = 2 * (out.shape[0] + out.shape[1])
     for rho, theta in _as_lines(lines)[:, :2]:
@@ -29,7 +37,15 @@ def draw_lines(image: np.ndarray, lines: np.ndarray, color: tuple[int, int, int]
 
 def draw_segments(image: np.ndarray, segments: np.ndarray, color: tuple[int, int, int] = (0, 255, 0),
                   thickness: int = 1) -> np.ndarray:
-    """A BGR copy of ``image`` with the segments ``[x1, y1, x2, y2]`` drawn on it."""
+    """A BGR copy of ``image`` with the segments ``[x1, y1, x2, y2]`` drawn on it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> out = draw_segments(np.zeros((60, 80), np.uint8), [[10, 20, 60, 20]])
+    >>> int(out[20, 30].argmax()), int(out[20, 70].max())  # green on the segment, nothing past its end
+    (1, 0)
+    """
     out = to_bgr(image)
     for x1, y1, x2, y2 in np.asarray(segments, np.int64).reshape(-1, 4):
         cv2.line(out, (int(x1), int(y1)), (int(x2), int(y2)), color, thickness, cv2.LINE_AA)
@@ -49,6 +65,19 @@ def report_summary(metrics: dict, ours: dict, opencv: dict, pictures: list[dict]
         ``{"path", "caption"}`` overlays, repo-relative paths.
     dropped : list of dict
         ``{"item", "reason"}`` for every input image that was not processed.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ours = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
+    ...         "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
+    >>> opencv = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
+    ...           "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
+    >>> from cvpipe.hough.evaluate import compare_runs
+    >>> compared = compare_runs(ours, opencv, {"a": [[20.0, np.pi / 2], [5.0, 0.0]]})
+    >>> page = report_summary(compared, ours, opencv, pictures=[], dropped=[])
+    >>> page["task"], [t["title"] for t in page["tables"]]
+    ('hough', ['Per method', 'Per image'])
     """
     rows = metrics["per_image"]
     has_truth = metrics["truth_images"] > 0
@@ -91,7 +120,22 @@ def report_summary(metrics: dict, ours: dict, opencv: dict, pictures: list[dict]
 
 
 def quality_plot(metrics: dict) -> list[dict]:
-    """``dvc plots`` rows ``{"image", "method", "lines", "true_found"}``: what each implementation found per image."""
+    """``dvc plots`` rows ``{"image", "method", "lines", "true_found"}``: what each implementation found per image.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ours = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
+    ...         "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
+    >>> opencv = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
+    ...           "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
+    >>> from cvpipe.hough.evaluate import compare_runs
+    >>> compared = compare_runs(ours, opencv, {"a": [[20.0, np.pi / 2], [5.0, 0.0]]})
+    >>> for row in quality_plot(compared):
+    ...     print(row)
+    {'image': 'a', 'method': 'ours', 'lines': 1, 'true_found': 1}
+    {'image': 'a', 'method': 'opencv', 'lines': 1, 'true_found': 1}
+    """
     rows = []
     for r in metrics["per_image"]:
         for key, count in (("ours", r["our_lines"]), ("opencv", r["ref_lines"])):

@@ -131,6 +131,13 @@ def hough_grid(
     Returns
     -------
     HoughGrid
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> grid = hough_grid((480, 640), rho=1.0, theta=np.pi / 180)
+    >>> grid.numangle, grid.numrho, grid.center  # numrho = round(2 (480 + 640) + 1)
+    (180, 2241, 1120)
     """
     rho = _check_positive("rho", rho)
     theta = _check_positive("theta", theta)
@@ -216,6 +223,16 @@ def hough_accumulator(edges: np.ndarray, grid: HoughGrid, parallel: bool | None 
     -------
     ndarray, shape (numangle + 2, numrho + 2), int32
         Votes per (angle, rho) cell, with OpenCV's zero border: cell (n, r) is at ``[n + 1, r + 1]``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> edges = np.zeros((60, 80), np.uint8)
+    >>> edges[20, :] = 255  # the row y = 20: theta = 90 deg, rho = 20 px, 80 pixels
+    >>> grid = hough_grid(edges.shape)
+    >>> acc = hough_accumulator(edges, grid, parallel=False)
+    >>> int(acc[90 + 1, grid.center + 20 + 1])  # angle 90, rho 20, behind the one-cell border
+    80
     """
     import numba
 
@@ -270,6 +287,14 @@ def hough_lines(
     ndarray, shape (N, 3), float64
         ``[rho (px), theta (rad), votes]`` per line, sorted by votes (descending). Without ``refine`` the values are
         the float32 numbers that ``cv2.HoughLinesWithAccumulator`` returns, exactly.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> edges = np.zeros((60, 80), np.uint8)
+    >>> edges[20, :] = 255  # the row y = 20: theta = 90 deg, rho = 20 px, 80 pixels
+    >>> hough_lines(edges, 1.0, np.pi / 180, 60).tolist()
+    [[20.0, 1.5707963705062866, 80.0]]
     """
     edges = _check_edges(edges)
     threshold = _check_int("threshold", threshold, 1)
@@ -299,7 +324,19 @@ def hough_lines_opencv(
     edges: np.ndarray, rho: float = 1.0, theta: float = np.pi / 180, threshold: int = 150, *,
     min_theta: float = 0.0, max_theta: float = np.pi,
 ) -> np.ndarray:
-    """``cv2.HoughLinesWithAccumulator`` with our validation and output layout ((N, 3) float64, no lines -> (0, 3))."""
+    """``cv2.HoughLinesWithAccumulator`` with our validation and output layout ((N, 3) float64, no lines -> (0, 3)).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> edges = np.zeros((60, 80), np.uint8)
+    >>> edges[20, :] = 255  # the row y = 20: theta = 90 deg, rho = 20 px, 80 pixels
+    >>> lines = hough_lines_opencv(edges, 1.0, np.pi / 180, 60)
+    >>> lines.tolist()
+    [[20.0, 1.5707963705062866, 80.0]]
+    >>> np.array_equal(lines, hough_lines(edges, 1.0, np.pi / 180, 60))
+    True
+    """
     edges = _check_edges(edges)
     threshold = _check_int("threshold", threshold, 1)
     hough_grid(edges.shape, rho, theta, min_theta, max_theta)  # same validation as ours
@@ -315,7 +352,15 @@ IMPLEMENTATIONS = {"ours": hough_lines, "opencv": hough_lines_opencv}
 
 
 def get_impl(name: str):
-    """The standard Hough function registered as ``name`` in ``IMPLEMENTATIONS``."""
+    """The standard Hough function registered as ``name`` in ``IMPLEMENTATIONS``.
+
+    Examples
+    --------
+    >>> get_impl("opencv") is hough_lines_opencv
+    True
+    >>> sorted(IMPLEMENTATIONS)
+    ['opencv', 'ours']
+    """
     if name not in IMPLEMENTATIONS:
         raise InputError(f"`impl` must be one of {sorted(IMPLEMENTATIONS)}, got {name!r}")
     return IMPLEMENTATIONS[name]
