@@ -226,11 +226,9 @@ def compare_runs(ours: dict, opencv: dict, truth: dict | None = None, rho_tol: f
     Examples
     --------
     >>> import numpy as np
-    >>> ours = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
-    ...         "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
-    >>> opencv = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
-    ...           "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
-    >>> compared = compare_runs(ours, opencv, {"a": [[20.0, np.pi / 2], [5.0, 0.0]]})
+    >>> run = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
+    ...        "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
+    >>> compared = compare_runs(run, run, {"a": [[20.0, np.pi / 2], [5.0, 0.0]]})
     >>> compared["parity_min"], compared["identical_images"], compared["recall_ours"]
     (1.0, 1, 0.5)
     """
@@ -270,11 +268,9 @@ def metrics_of(compared: dict) -> dict:
     Examples
     --------
     >>> import numpy as np
-    >>> ours = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
-    ...         "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
-    >>> opencv = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
-    ...           "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
-    >>> compared = compare_runs(ours, opencv, {"a": [[20.0, np.pi / 2], [5.0, 0.0]]})
+    >>> run = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
+    ...        "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
+    >>> compared = compare_runs(run, run, {"a": [[20.0, np.pi / 2], [5.0, 0.0]]})
     >>> m = metrics_of(compared)["hough"]
     >>> sorted(m), m["a"]["identical"], m["all"]["recall_opencv"]
     (['a', 'all'], 1, 0.5)

@@ -69,13 +69,11 @@ def report_summary(metrics: dict, ours: dict, opencv: dict, pictures: list[dict]
     Examples
     --------
     >>> import numpy as np
-    >>> ours = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
-    ...         "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
-    >>> opencv = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
-    ...           "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
+    >>> run = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
+    ...        "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
     >>> from cvpipe.hough.evaluate import compare_runs
-    >>> compared = compare_runs(ours, opencv, {"a": [[20.0, np.pi / 2], [5.0, 0.0]]})
-    >>> page = report_summary(compared, ours, opencv, pictures=[], dropped=[])
+    >>> compared = compare_runs(run, run, {"a": [[20.0, np.pi / 2], [5.0, 0.0]]})
+    >>> page = report_summary(compared, run, run, pictures=[], dropped=[])
     >>> page["task"], [t["title"] for t in page["tables"]]
     ('hough', ['Per method', 'Per image'])
     """
@@ -124,17 +122,11 @@ def quality_plot(metrics: dict) -> list[dict]:
 
     Examples
     --------
-    >>> import numpy as np
-    >>> ours = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
-    ...         "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
-    >>> opencv = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
-    ...           "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
-    >>> from cvpipe.hough.evaluate import compare_runs
-    >>> compared = compare_runs(ours, opencv, {"a": [[20.0, np.pi / 2], [5.0, 0.0]]})
-    >>> for row in quality_plot(compared):
+    >>> compared = {"per_image": [{"file": "a", "our_lines": 3, "ref_lines": 2, "truth_found_ours": 1}]}  # no truth
+    >>> for row in quality_plot(compared):                                            # for OpenCV's lines here
     ...     print(row)
-    {'image': 'a', 'method': 'ours', 'lines': 1, 'true_found': 1}
-    {'image': 'a', 'method': 'opencv', 'lines': 1, 'true_found': 1}
+    {'image': 'a', 'method': 'ours', 'lines': 3, 'true_found': 1}
+    {'image': 'a', 'method': 'opencv', 'lines': 2, 'true_found': None}
     """
     rows = []
     for r in metrics["per_image"]:
