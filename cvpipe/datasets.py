@@ -12,7 +12,8 @@ Layouts (any of png, jpg/jpeg, tif/tiff, bmp, webp, in any letter case):
 - defect: ``reference.*`` and the folder ``probes/``.
 - logo: ``gallery/`` (one image per brand named after it, or one subfolder per brand) and ``scenes/``.
 - stereo: every subfolder is one pair holding ``left.*`` and ``right.*`` (a folder holding them itself is one
-  pair); an optional ``calib.txt`` (Middlebury) or ``truth.json`` with ``max_disp`` may set the search range.
+  pair); an optional ``calib.txt`` (Middlebury) or ``truth.json`` with ``max_disp`` may set the search range; a
+  calibration (``calib.txt`` or an OpenCV ``calib.yml`` / ``calib.yaml``) gives depth.
 - panorama: every subfolder is one set, its images in any order.
 
 This module only lists and parses small text files; images are read by :mod:`cvpipe.io`.
@@ -271,8 +272,12 @@ class StereoPair:
     left: Path
     right: Path
     max_disp: int | None = None  # from the pair's own truth.json or calib.txt; None = the params.yaml value
-    calib: Path | None = None
+    calib: Path | None = None  # calib.txt (Middlebury) or calib.yml / calib.yaml (OpenCV stereo calibration)
     truth: Path | None = None  # truth.npz with `disparity` (float32, NaN = unknown)
+
+
+#: a pair's calibration file, first found: Middlebury calib.txt or an OpenCV stereo YAML (K1 D1 K2 D2 R T)
+CALIB_FILES = ("calib.txt", "calib.yml", "calib.yaml")
 
 
 def _stereo_pair(d: Path, name: str) -> StereoPair | str:
@@ -280,7 +285,7 @@ def _stereo_pair(d: Path, name: str) -> StereoPair | str:
     if "left" not in imgs or "right" not in imgs:
         return "needs left.<ext> and right.<ext>"
     max_disp = None
-    calib = d / "calib.txt" if (d / "calib.txt").is_file() else None
+    calib = next((d / n for n in CALIB_FILES if (d / n).is_file()), None)
     if (d / TRUTH_FILE).is_file():
         data = load_json(d / TRUTH_FILE)
         if not isinstance(data, dict):
@@ -290,7 +295,7 @@ def _stereo_pair(d: Path, name: str) -> StereoPair | str:
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise InputError(f"{d / TRUTH_FILE}: field `max_disp` must be an integer >= 1, got {v!r}")
             max_disp = v
-    if max_disp is None and calib is not None:
+    if max_disp is None and calib is not None and calib.suffix == ".txt":
         m = re.search(r"^\s*ndisp\s*=\s*(\d+)\s*$", calib.read_text(encoding="utf-8", errors="replace"), re.M)
         if m:
             max_disp = int(m.group(1))

@@ -33,6 +33,7 @@ import numpy as np
 from numba import njit
 
 from .errors import EstimationError, InputError
+from .linalg import cholesky_solve as _cholesky_solve
 
 #: default iteration cap of :func:`find_homography` (enough for ~85 % outliers at confidence 0.999)
 DEFAULT_MAX_ITERS = 10_000
@@ -484,37 +485,6 @@ def _jacobi_eigh(M, V):
         for i in range(n):
             V[i, j] = Vs[i, order[j]]
     return ws
-
-
-@njit(cache=True, error_model="numpy")
-def _cholesky_solve(A, b, x):
-    """Solve A x = b for a symmetric positive definite A (n x n) by Cholesky; False if A is not positive definite."""
-    n = A.shape[0]
-    L = np.zeros((n, n))
-    for j in range(n):
-        s = A[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not s > 0.0:
-            return False
-        L[j, j] = math.sqrt(s)
-        for i in range(j + 1, n):
-            s = A[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            L[i, j] = s / L[j, j]
-    y = np.empty(n)
-    for i in range(n):
-        s = b[i]
-        for k in range(i):
-            s -= L[i, k] * y[k]
-        y[i] = s / L[i, i]
-    for i in range(n - 1, -1, -1):
-        s = y[i]
-        for k in range(i + 1, n):
-            s -= L[k, i] * x[k]
-        x[i] = s / L[i, i]
-    return True
 
 
 @njit(cache=True, error_model="numpy")

@@ -1,5 +1,6 @@
 """Descriptor matching: FLANN (KD-tree) for float descriptors, Hamming brute force for binary ones, Lowe's ratio
-test and an optional mutual (cross) check."""
+test and an optional mutual (cross) check; exact brute-force nearest neighbours of float descriptors by one matrix
+product (:func:`nearest_two`, :func:`ratio_matches`)."""
 
 from __future__ import annotations
 
@@ -120,3 +121,66 @@ def match(desc_a: np.ndarray, desc_b: np.ndarray, ratio: float = 0.8, cross_chec
         pairs, dists = pairs[keep], dists[keep]
     order = np.argsort(dists, kind="stable")
     return pairs[order]
+
+
+#: most entries of one block of the query x train distance matrix in :func:`nearest_two` (16 M float32 = 64 MB)
+DISTANCE_BLOCK = 1 << 24
+
+
+def nearest_two(query: np.ndarray, train: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact nearest and second-nearest neighbours in ``train`` of every row of ``query`` (brute force).
+
+    The squared distances come from one matrix product, ``|q|^2 + |t|^2 - 2 q t^T`` (``cv2.gemm``), which on
+    1500 x 1500 SIFT descriptors is about twice as fast as FLANN's approximate search and exact.
+
+    Parameters
+    ----------
+    query : (Nq, D) float32
+    train : (Nt, D) float32, Nt >= 2
+
+    Returns
+    -------
+    nearest : (Nq,) int64
+        Index into ``train`` of each query's nearest neighbour.
+    d1, d2 : (Nq,) float32
+        Squared L2 distances to the nearest and the second nearest.
+    """
+    q = np.ascontiguousarray(query, np.float32)
+    t = np.ascontiguousarray(train, np.float32)
+    tt = np.einsum("ij,ij->i", t, t)[None, :]
+    nearest = np.empty(len(q), np.int64)
+    d1 = np.empty(len(q), np.float32)
+    d2 = np.empty(len(q), np.float32)
+    step = max(1, DISTANCE_BLOCK // max(len(t), 1))
+    for lo in range(0, len(q), step):
+        d = cv2.gemm(q[lo:lo + step], t, -2.0, None, 0.0, flags=cv2.GEMM_2_T)
+        d += tt
+        best = np.argmin(d, axis=1)
+        rows = np.arange(len(d))
+        nearest[lo:lo + step] = best
+        d1[lo:lo + step] = d[rows, best]
+        d[rows, best] = np.inf
+        d2[lo:lo + step] = d.min(axis=1)
+    qq = np.einsum("ij,ij->i", q, q)
+    return nearest, np.maximum(d1 + qq, 0), np.maximum(d2 + qq, 0)
+
+
+def ratio_matches(query: np.ndarray, train: np.ndarray, ratio: float) -> np.ndarray:
+    """Exact ratio-test matches of float descriptors (:func:`nearest_two`), as :meth:`MatchIndex.query` returns
+    them: (M, 2) int64 pairs ``[i_query, i_train]`` sorted by distance, best first.
+
+    Examples
+    --------
+    >>> q = np.array([[0, 0], [10, 10]], np.float32)
+    >>> t = np.array([[10, 11], [0, 1], [50, 50]], np.float32)
+    >>> ratio_matches(q, t, 0.8)
+    array([[0, 1],
+           [1, 0]])
+    """
+    if len(query) == 0 or len(train) < 2:  # no second neighbour: the generic matcher's conventions
+        return match(query, train, ratio=ratio, binary=False)
+    nearest, d1, d2 = nearest_two(query, train)
+    keep = np.nonzero(d1 < ratio * ratio * d2)[0]
+    keep = keep[np.argsort(d1[keep], kind="stable")]
+    return np.column_stack([keep, nearest[keep]]).astype(np.int64)
+

@@ -465,16 +465,22 @@ class PanoramaWarpParams:
 
 @dataclass(frozen=True)
 class PanoramaBlendParams:
-    """``panorama.blend``: gain compensation and the blender (multi-band with ``bands`` levels, or feather)."""
+    """``panorama.blend``: exposure compensation (``gain_compensation``: OpenCV's compensator kinds, blocks of
+    ``gain_block`` pixels) and the blender (multi-band with ``bands`` levels, or feather)."""
 
     blender: str = "multiband"
     bands: int = 5
-    gain_compensation: bool = True
+    gain_compensation: Literal["none", "gain", "channels", "blocks", "channel_blocks"] = "gain"
+    gain_block: int = 32
 
     def __post_init__(self):
         if self.blender not in ("multiband", "feather"):
             raise ValueError(f"`blender` must be one of ['feather', 'multiband'], got {self.blender!r}")
         _in_range("bands", self.bands, 1, 12)
+        gains = ["none", "gain", "channels", "blocks", "channel_blocks"]
+        if self.gain_compensation not in gains:
+            raise ValueError(f"`gain_compensation` must be one of {gains}, got {self.gain_compensation!r}")
+        _in_range("gain_block", self.gain_block, 4, 1024)
 
 
 SECTIONS.update({
@@ -655,6 +661,37 @@ class StereoSgbmParams:
 
 
 @dataclass(frozen=True)
+class StereoRectifyParams:
+    """``stereo.rectify``: features, matching and the fundamental-matrix fit of :mod:`cvpipe.rectify`, and when a
+    pair counts as already rectified (:func:`cvpipe.rectify.looks_rectified`)."""
+
+    detector: Literal["sift", "orb", "brisk", "akaze"] = "sift"
+    max_features: int = 4000
+    ratio: float = 0.8
+    threshold: float = 1.0
+    margin: float = 1.0
+    seed: int = 0
+    rectified_max_dy: float = 1.0
+    rectified_share: float = 0.75
+
+    def __post_init__(self):
+        _in_range("max_features", self.max_features, 1, 1_000_000)
+        _in_range("ratio", self.ratio, 0.0, 1.0, lo_open=True)
+        _in_range("threshold", self.threshold, 0.0, 100.0, lo_open=True)
+        _in_range("margin", self.margin, 0.0, 1000.0)
+        _in_range("seed", self.seed, 0)
+        _in_range("rectified_max_dy", self.rectified_max_dy, 0.0, 100.0, lo_open=True)
+        _in_range("rectified_share", self.rectified_share, 0.0, 1.0, lo_open=True)
+
+
+@dataclass(frozen=True)
+class StereoDepthParams:
+    """``stereo.depth``: which method's disparity becomes depth and a point cloud (pairs with a calibration)."""
+
+    method: Literal["sgm", "opencv_bm", "opencv_sgbm"] = "sgm"
+
+
+@dataclass(frozen=True)
 class StereoReportParams:
     """``stereo.report``: the absolute error (pixels) at which the error maps' colour saturates."""
 
@@ -670,4 +707,6 @@ SECTIONS.update({
     "stereo.opencv_bm": StereoBmParams,
     "stereo.opencv_sgbm": StereoSgbmParams,
     "stereo.report": StereoReportParams,
+    "stereo.rectify": StereoRectifyParams,
+    "stereo.depth": StereoDepthParams,
 })

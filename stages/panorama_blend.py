@@ -1,28 +1,31 @@
-"""Stage `panorama_blend`: per set, gain compensation, seams and multi-band (or feather) blending of the canvas
+"""Stage `panorama_blend`: per set, exposure compensation, seams and multi-band (or feather) blending of the canvas
 (`<out>/<set>.png`, `<set>_mask.png`, `<set>_seams.png`, `<set>.json`; a failed set is recorded in its JSON)."""
 
 from pathlib import Path
 
 import numpy as np
 
-from cvpipe import blending, io, warping
+from cvpipe import io, panorama
 from stages import _panorama as pr
 from stages._runner import Stage, run
 
 
 def _blend(st: Stage, d: Path, meta: dict, out: Path) -> dict:
     p, n = st.params, len(meta["corners"])
-    w = warping.Warped([io.read_image(d / f"warped_{k}.png", "color") for k in range(n)],
+    w = panorama.Warped([io.read_image(d / f"warped_{k}.png", "color") for k in range(n)],
                        [io.read_image(d / f"mask_{k}.png", "gray") for k in range(n)],
                        [tuple(c) for c in meta["corners"]], tuple(meta["size"]), tuple(meta["origin"]))
     with st.timer("blend"):
-        pano, mask, seams = blending.compose(w, p.blender, p.bands, p.gain_compensation)
-    gains = blending.gain_compensation(w) if p.gain_compensation else np.ones(n)
+        pano, mask, seams = panorama.compose(w, p.blender, p.bands, p.gain_compensation, p.gain_block)
+    gains = panorama.compensation_gains(w, p.gain_compensation, p.gain_block)
+    gains = np.ones(n) if gains is None else gains
     io.save_image(out / f"{d.name}.png", pano)
     io.save_image(out / f"{d.name}_mask.png", mask.astype(np.uint8) * 255)
     io.save_image(out / f"{d.name}_seams.png", seams.astype(np.uint8) * 255)
-    return {"ok": True, "gains": gains, "ghosting": blending.overlap_difference(w, gains),
-            "ghosting_without_gains": blending.overlap_difference(w)}
+    # one gain per image, per image and channel, or (block modes) each image's mean gain per channel
+    shown = gains if isinstance(gains, np.ndarray) else np.stack([g.reshape(-1, g.shape[2]).mean(0) for g in gains])
+    return {"ok": True, "gains": shown, "ghosting": panorama.overlap_difference(w, gains),
+            "ghosting_without_gains": panorama.overlap_difference(w)}
 
 
 def panorama_blend(st: Stage) -> None:

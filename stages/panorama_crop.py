@@ -3,7 +3,7 @@
 
 from pathlib import Path
 
-from cvpipe import blending, io
+from cvpipe import io, panorama
 from cvpipe.errors import EstimationError
 from stages import _panorama as pr
 from stages._runner import Stage, run
@@ -13,7 +13,7 @@ def _crop(st: Stage, src: Path, name: str, out: Path) -> dict:
     pano = io.read_image(src / f"{name}.png", "color")
     mask = io.read_image(src / f"{name}_mask.png", "gray") > 0
     with st.timer("crop"):
-        x, y, w, h = blending.largest_rectangle(mask)
+        x, y, w, h = panorama.largest_rectangle(mask)
     if w * h == 0:
         raise EstimationError("no pixel of the panorama is covered by an image")
     io.save_image(out / f"{name}.png", pano[y:y + h, x:x + w])

@@ -3,8 +3,8 @@ folder has a truth.json, what was not processed and why, metrics (git-tracked) a
 
 from pathlib import Path
 
-from cvpipe import blending, datasets, io
-from cvpipe import panorama_report as pr
+from cvpipe import datasets, io
+from cvpipe.panorama import report as pr
 from stages._runner import Stage, run
 
 #: height in pixels of the report's side-by-side pictures
@@ -23,15 +23,15 @@ def _pictures(st: Stage, results: list[dict]) -> list[dict]:
         ours_img = io.read_image(Path(a.crop) / f"{name}.png") if ours["ok"] else None
         cv_img = io.read_image(Path(a.opencv) / f"{name}.png") if cv["ok"] else None
         path = Path(a.pictures) / f"{name}_side_by_side.png"
-        io.save_image(path, blending.side_by_side([ours_img, cv_img], PICTURE_HEIGHT))
+        io.save_image(path, pr.side_by_side([ours_img, cv_img], PICTURE_HEIGHT))
         status = cv.get("status", "not run")
         pictures.append({"path": path.as_posix(),
                          "caption": f"{name}: ours (left, cropped) vs cv2.Stitcher (right, {status})"})
         if (Path(a.blend) / f"{name}_seams.png").is_file():
             seams = io.read_image(Path(a.blend) / f"{name}_seams.png", "gray") > 0
-            over = blending.overlay_seams(io.read_image(Path(a.blend) / f"{name}.png"), seams)
+            over = pr.overlay_seams(io.read_image(Path(a.blend) / f"{name}.png"), seams)
             path = Path(a.pictures) / f"{name}_seams.png"
-            io.save_image(path, blending.side_by_side([over], over.shape[0]))
+            io.save_image(path, pr.side_by_side([over], over.shape[0]))
             pictures.append({"path": path.as_posix(), "caption": f"{name}: our seam lines (red)"})
     return pictures
 

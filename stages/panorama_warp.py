@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cvpipe import io, panorama, warping
+from cvpipe import io, panorama
 from stages import _panorama as pr
 from stages._runner import Stage, run
 
@@ -17,7 +17,7 @@ def _warp(st: Stage, h: dict, folder: Path, out: Path) -> dict:
     images = [io.read_image(folder / name, "color") if k in reg.used else None for k, name in enumerate(h["files"])]
     with st.timer("warp"):
         comp = panorama.compose_inputs(images, reg, [tuple(s) for s in h["work_sizes"]], p.compose_megapix)
-        w = warping.warp_images(comp.images, comp.G, p.projection, comp.focal, comp.ref_size, p.max_canvas_megapix)
+        w = panorama.warp_images(comp.images, comp.G, p.projection, comp.focal, comp.ref_size, p.max_canvas_megapix)
     for k, (img, mask) in enumerate(zip(w.images, w.masks)):
         io.save_image(out / f"warped_{k}.png", img)
         io.save_image(out / f"mask_{k}.png", mask)

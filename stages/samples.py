@@ -1,4 +1,5 @@
-"""Stage `samples`: build the bundled sample data set into data/samples/<task>/ (images + truth.json).
+"""Stage `samples`: build the bundled sample data set into data/samples/<task>/ (images, truth.json and the
+further truth / calibration files).
 
 This folder is this stage's output: it is replaced whenever the stage reruns. Your own images go elsewhere
 (data/mine/..., see the README's "Your own images")."""
@@ -21,7 +22,13 @@ def build_samples(st: Stage) -> None:
             io.save_image(tmp / task / name, img)
         for name, arrays in s.arrays.items():
             io.save_npz(tmp / task / name, **arrays)
-        io.save_json(tmp / task / "truth.json", s.truth)
+        for name, text in s.texts.items():
+            (tmp / task / name).parent.mkdir(parents=True, exist_ok=True)
+            (tmp / task / name).write_text(text, encoding="utf-8")
+        for name, doc in s.docs.items():
+            io.save_json(tmp / task / name, doc)
+        if s.truth:
+            io.save_json(tmp / task / "truth.json", s.truth)
     (tmp / "README.md").write_text(samples.README, encoding="utf-8")
     shutil.rmtree(out, ignore_errors=True)
     tmp.rename(out)  # the finished folder appears in one step

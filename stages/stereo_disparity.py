@@ -1,9 +1,10 @@
-"""Stage `stereo_disparity@{sgm,opencv_bm,opencv_sgbm}`: disparity of every pair of `stereo.data`:
-``<pair>/disparity.npy`` (float32, NaN = none), ``<pair>/disparity.png`` (16-bit, round(256 d), 0 = none) and
-``run.json`` (per pair max_disp, valid fraction and, with a truth.npz, the accuracy; what was dropped and why), plus
-the metrics file. Layout: every subfolder is one pair with ``left.*`` / ``right.*`` (a folder holding them itself is
-one pair); max_disp is the pair's own (truth.json ``max_disp`` or calib.txt ``ndisp``), else
-``stereo.disparity.max_disp``."""
+"""Stage `stereo_disparity@{sgm,opencv_bm,opencv_sgbm}`: disparity of every pair that `stereo_rectify` rectified
+(its ``<pair>/left.png`` / ``right.png``; the pairs it dropped it recorded): ``<pair>/disparity.npy`` (float32, NaN =
+none, in the rectified left frame), ``<pair>/disparity.png`` (16-bit, round(256 d), 0 = none) and ``run.json`` (per
+pair max_disp and where it came from, valid fraction and, with a truth.npz in the same frame, the accuracy; what was
+dropped and why), plus the metrics file. max_disp: the pair's own (truth.json ``max_disp`` or calib.txt ``ndisp``),
+else the rectification's estimate from the matches, else ``stereo.disparity.max_disp``. A truth.npz is used only for
+a pair that needed no rectification (it is in the original frame)."""
 
 import dataclasses
 from pathlib import Path
@@ -33,14 +34,18 @@ def read_truth(path: Path, shape: tuple[int, ...]) -> np.ndarray:
 def stereo_disparity(st: Stage) -> None:
     a, method = st.args, st.args.method
     options = dataclasses.asdict(load_section(SECTIONS[f"stereo.{method}"], f"stereo.{method}", a.params))
-    pairs, dropped = datasets.find_stereo(a.pairs)
-    for d in dropped:
-        st.drop(d["item"], d["reason"])
-    out, results = Path(a.out), {}
-    for pair in st.progress(pairs, f"disparity {method}"):
-        max_disp = pair.max_disp or st.params.max_disp
+    rectified = Path(a.rectified)
+    rects = io.load_json(rectified / "run.json")["pairs"]
+    pairs, _ = datasets.find_stereo(a.pairs)  # what it drops and what could not be rectified, stereo_rectify recorded
+    out, results, sources = Path(a.out), {}, {}
+    for pair in st.progress([q for q in pairs if q.name in rects], f"disparity {method}"):
+        rect = rects[pair.name]
+        candidates = (("pair", pair.max_disp), ("rectification", rect.get("max_disp")),
+                      ("stereo.disparity", st.params.max_disp))
+        sources[pair.name], max_disp = next((k, v) for k, v in candidates if v is not None)
         try:
-            left, right = io.read_image(pair.left), io.read_image(pair.right)
+            left = io.read_image(rectified / pair.name / "left.png")
+            right = io.read_image(rectified / pair.name / "right.png")
             if not results:
                 with st.timer("warmup"):
                     stereo.compute_disparity(left[:WARMUP_ROWS], right[:WARMUP_ROWS], max_disp, method, **options)
@@ -49,7 +54,7 @@ def stereo_disparity(st: Stage) -> None:
         except (InputError, ValueError) as exc:
             st.drop(pair.name, str(exc))
             continue
-        truth = read_truth(pair.truth, disp.shape) if pair.truth is not None else None
+        truth = read_truth(pair.truth, disp.shape) if pair.truth is not None and rect["kind"] == "none" else None
         with io.atomic_path(out / pair.name / "disparity.npy") as tmp:
             with open(tmp, "wb") as fh:
                 np.save(fh, disp.astype(np.float32), allow_pickle=False)
@@ -58,7 +63,7 @@ def stereo_disparity(st: Stage) -> None:
         except ValueError as exc:  # disparities of 256 px or more: the npy has them
             st.drop(f"{pair.name}/disparity.png", str(exc))
         results[pair.name] = {**stereo.pair_result(disp, max_disp, truth), "truth": truth is not None}
-    result = {"method": method, "pairs": results, "dropped": st.dropped}
+    result = {"method": method, "pairs": results, "dropped": st.dropped, "max_disp_from": sources}
     io.save_json(out / "run.json", result)
     io.save_json(a.metrics, stereo.metrics_of(result))
     if not results:
@@ -68,6 +73,7 @@ def stereo_disparity(st: Stage) -> None:
 
 if __name__ == "__main__":
     run(stereo_disparity, section="stereo.disparity", item="method",
-        args={"pairs": "the stereo.data folder", "out": "folder for <pair>/disparity.npy|png and run.json",
+        args={"pairs": "the stereo.data folder", "rectified": "stereo_rectify's output folder",
+              "out": "folder for <pair>/disparity.npy|png and run.json",
               "metrics": "metrics JSON (git-tracked)"},
         options={"method": {"required": True, "choices": sorted(stereo.METHODS)}})

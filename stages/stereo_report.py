@@ -1,39 +1,68 @@
-"""Stage `stereo_report`: per pair one picture of the methods side by side (and, for pairs with a truth.npz, the true
-disparity and each method's error map), the comparison tables and the quality plots (bad-2.0 where there is truth,
-the valid fraction for every pair)."""
+"""Stage `stereo_report`: per pair the rectification picture (before / after, epipolar lines of a few matches), the
+depth picture (pairs with a calibration) and one picture of the methods side by side in the rectified frame (and,
+for pairs with a truth.npz in that frame, the true disparity and each method's error map), the comparison tables and
+the quality plots (bad-2.0 where there is truth, the valid fraction for every pair, the vertical error)."""
 
 from pathlib import Path
 
 import numpy as np
 
-from cvpipe import datasets, io, stereo
+from cvpipe import datasets, io, stereo, stereo_pipeline
 from stages._runner import Stage, run
 from stages.stereo_disparity import read_truth
 
 
 def stereo_report(st: Stage) -> None:
     p, a = st.params, st.args
-    pairs, _ = datasets.find_stereo(a.pairs)  # what it drops, stereo_disparity recorded
+    rectified, depth_dir = Path(a.rectified), Path(a.depth)
+    rect_run, depth_run = io.load_json(rectified / "run.json"), io.load_json(depth_dir / "run.json")
+    rects = rect_run["pairs"]
+    pairs, _ = datasets.find_stereo(a.pairs)  # what it drops, stereo_rectify recorded
     runs = {}
     for folder in a.disparities:
         r = io.load_json(Path(folder) / "run.json")
         runs[r["method"]] = {**r, "folder": Path(folder)}
-    out, pictures = Path(a.out), []
-    for pair in st.progress([q for q in pairs if any(q.name in r["pairs"] for r in runs.values())], "stereo pictures"):
-        left = io.read_image(pair.left)
+    out, pictures, extra = Path(a.out), [], []
+    for pair in st.progress([q for q in pairs if q.name in rects], "stereo pictures"):
+        rec, here = rects[pair.name], rectified / pair.name
+        left, right = io.read_image(here / "left.png"), io.read_image(here / "right.png")
+        m = io.load_npz(here / "matches.npz")
+        path = out / f"{pair.name}_rectified.png"
+        io.save_image(path, stereo_pipeline.rectification_picture(
+            io.read_image(pair.left), io.read_image(pair.right), left, right, rec["H_left"], rec["H_right"],
+            m["left"], m["right"]))
+        err = rec.get("vertical_error_median_px")
+        extra.append({"path": path.as_posix(), "caption": (
+            f"{pair.name}: rectification {rec['kind']}; vertical error median "
+            f"{'n/a' if err is None else f'{err:.2f}'} px over {rec['vertical_error_over']} (top: original, "
+            "bottom: rectified; a match's right point should lie on its line)")})
+        if pair.name in depth_run["pairs"]:
+            z = np.load(depth_dir / pair.name / "depth.npy", allow_pickle=False)
+            unit = depth_run["units"][pair.name]
+            path = out / f"{pair.name}_depth.png"
+            io.save_image(path, stereo_pipeline.depth_picture(left, z, unit))
+            extra.append({"path": path.as_posix(), "caption": (
+                f"{pair.name}: depth in {unit} from {depth_run['method']} (black = no depth); point cloud "
+                f"{(depth_dir / pair.name / 'cloud.ply').as_posix()}")})
+        if not any(pair.name in r["pairs"] for r in runs.values()):
+            continue
         max_disp = next(r["pairs"][pair.name]["max_disp"] for r in runs.values() if pair.name in r["pairs"])
         disps = {m: (np.load(r["folder"] / pair.name / "disparity.npy", allow_pickle=False)
                      if pair.name in r["pairs"] else None) for m, r in runs.items()}
-        truth = read_truth(pair.truth, left.shape[:2]) if pair.truth is not None else None
+        truth = read_truth(pair.truth, left.shape[:2]) if pair.truth is not None and rec["kind"] == "none" else None
         path = out / f"{pair.name}.png"
         io.save_image(path, stereo.comparison_picture(left, disps, max_disp, truth, p.error_clip))
         what = "top: left image and each method's disparity; bottom: true disparity and each method's |error|" \
-            if truth is not None else "left image and each method's disparity (no ground truth)"
+            if truth is not None else "left image and each method's disparity (no ground truth" + \
+            (" in the rectified frame)" if pair.truth is not None else ")")
         pictures.append({"path": path.as_posix(), "caption": f"{pair.name} (max_disp {max_disp}): {what}"})
-    dropped = stereo.merge_dropped(runs)
-    io.save_json(a.summary, stereo.report_summary(runs, pictures, dropped, p.error_clip))
+    dropped = rect_run["dropped"] + stereo.merge_dropped(runs) + depth_run["dropped"]
+    summary = stereo.report_summary(runs, pictures, dropped, p.error_clip)
+    with_truth = tuple(q.name for q in pairs if q.truth is not None)
+    io.save_json(a.summary, stereo_pipeline.extend_summary(summary, rects, depth_run, extra, with_truth))
     for name, rows in stereo.quality_plots(runs).items():
         io.save_json(Path(a.plots) / f"{name}.json", rows)
+    io.save_json(Path(a.plots) / "vertical_error.json", stereo_pipeline.vertical_error_plot(rects))
     st.made(f"{len(pictures)} pairs compared over {len(runs)} methods, pictures in {out}")
     for d in dropped:
         st.drop(d["item"], d["reason"])
@@ -41,6 +70,7 @@ def stereo_report(st: Stage) -> None:
 
 if __name__ == "__main__":
     run(stereo_report, section="stereo.report",
-        args={"pairs": "the stereo.data folder", "disparities": "+stereo_disparity output folders, one per method",
+        args={"pairs": "the stereo.data folder", "rectified": "stereo_rectify's output folder",
+              "disparities": "+stereo_disparity output folders, one per method", "depth": "stereo_depth's folder",
               "out": "folder for the pictures", "summary": "summary JSON for the report page",
               "plots": "folder for dvc plots data"})

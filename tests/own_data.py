@@ -57,8 +57,8 @@ def build_logo(s: Path, d: Path) -> list[str]:
 
 
 def build_stereo(s: Path, d: Path) -> list[str]:
-    _copy(s / "left.png", d / "bike" / "left.png")
-    _copy(s / "right.png", d / "bike" / "right.PNG")
+    _copy(s / "motorcycle" / "left.png", d / "bike" / "left.png")
+    _copy(s / "motorcycle" / "right.png", d / "bike" / "right.PNG")
     return ["bike"]
 
 

@@ -43,7 +43,12 @@ def workdir(tmp_path_factory) -> Path:
             io.save_image(out / task / name, img)
         for name, arrays in s.arrays.items():
             io.save_npz(out / task / name, **arrays)
-        io.save_json(out / task / "truth.json", s.truth)
+        for name, text in s.texts.items():
+            (out / task / name).write_text(text)
+        for name, doc in s.docs.items():
+            io.save_json(out / task / name, doc)
+        if s.truth:
+            io.save_json(out / task / "truth.json", s.truth)
     return root
 
 
@@ -204,7 +209,7 @@ def test_pictures_have_the_input_size(workdir, tmp_path, capsys):
     # the checkerboard alternates A and warped B: A's tiles are A itself, so a good share of pixels equals A
     assert 0.2 < np.mean(np.all(pic == A, axis=2)) < 0.9
 
-    left, right = s / "stereo" / "left.png", s / "stereo" / "right.png"
+    left, right = s / "stereo" / "motorcycle" / "left.png", s / "stereo" / "motorcycle" / "right.png"
     res = _run_json(["stereo", str(left), str(right), "--max-disp", "64", "--method", "opencv_bm", "-o",
                      str(tmp_path / "d.npy"), "--overlay", str(tmp_path / "d.png"), "--json"], capsys)
     L, pic = cv2.imread(str(left)), cv2.imread(res["overlay"])
@@ -244,7 +249,7 @@ def test_inspect_overlay_per_probe(workdir, tmp_path, capsys):
 
 
 def test_stereo_png_output_is_the_picture(workdir, tmp_path, capsys):
-    s = workdir / "data" / "samples" / "stereo"
+    s = workdir / "data" / "samples" / "stereo" / "motorcycle"
     res = _run_json(["stereo", str(s / "left.png"), str(s / "right.png"), "--max-disp", "64", "--method",
                      "opencv-bm", "-o", str(tmp_path / "d.png"), "--json"], capsys)
     assert res["out"] == str(tmp_path / "d.png") and cv2.imread(res["out"]) is not None
@@ -268,7 +273,8 @@ def test_stitch_json_names_files(workdir, tmp_path, capsys):
 
 
 def test_choices_match_the_registries():
-    from cvpipe import features, homography, hough, stereo, warping
+    from cvpipe import features, homography, hough, stereo
+    from cvpipe.panorama import warp as warping
     from cvpipe.commands import homography as c_hom, hough as c_hough, inspect as c_insp, logo as c_logo
     from cvpipe.commands import stereo as c_stereo, stitch as c_stitch
 

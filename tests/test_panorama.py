@@ -1,4 +1,5 @@
-"""cvpipe.panorama / warping / blending and `cvpipe stitch` on synthetic views with known homographies.
+"""cvpipe.panorama (its steps: features, match, register, refine, warp, seams, blend, crop) and `cvpipe stitch` on
+synthetic views with known homographies.
 
 The views are taken by a virtual camera (focal 500 px) turning about its vertical axis in front of a photo, so the
 true homography between any two views is known exactly and is a pure rotation (which the cylindrical and
@@ -15,7 +16,10 @@ import cv2
 import numpy as np
 import pytest
 
-from cvpipe import blending, cli, panorama, warping
+import importlib
+
+from cvpipe import cli, matching, panorama
+from cvpipe.homography import find_homography
 from cvpipe.errors import EstimationError, InputError
 from cvpipe.params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams,
                            PanoramaMatchParams, PanoramaWarpParams)
@@ -52,7 +56,7 @@ def _views(yaws=YAWS, gains=None):
 def _corner_error(H: np.ndarray, H_true: np.ndarray, size=VIEW) -> float:
     w, h = size
     c = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], float)
-    return float(np.linalg.norm(warping.apply_h(H, c) - warping.apply_h(H_true, c), axis=1).mean())
+    return float(np.linalg.norm(panorama.warp.apply_h(H, c) - panorama.warp.apply_h(H_true, c), axis=1).mean())
 
 
 @pytest.fixture(scope="module")
@@ -159,17 +163,17 @@ def test_match_graph_and_registration_round_trip(views):
     assert again.used == reg.used and all(np.allclose(again.G[a], reg.G[a]) for a in reg.used)
 
 
-def _two_constant(v0: float, v1: float) -> warping.Warped:
+def _two_constant(v0: float, v1: float) -> panorama.warp.Warped:
     """Two 120x200 constant images overlapping over 80 columns of a 320-wide canvas."""
     imgs = [np.full((120, 200, 3), v0, np.uint8), np.full((120, 200, 3), v1, np.uint8)]
     masks = [np.full((120, 200), 255, np.uint8), np.full((120, 200), 255, np.uint8)]
-    return warping.Warped(imgs, masks, [(0, 0), (120, 0)], (320, 120), (0, 0))
+    return panorama.warp.Warped(imgs, masks, [(0, 0), (120, 0)], (320, 120), (0, 0))
 
 
 @pytest.mark.parametrize("blender", ["multiband", "feather"])
 def test_blending_is_seamless_on_constant_brightness(blender):
     w = _two_constant(137, 137)
-    pano, mask, seams = blending.compose(w, blender, 5, gain=True)
+    pano, mask, seams = panorama.compose(w, blender, 5, gain="gain")
     assert mask.all() and seams[:, 150:170].any()  # the seam runs through the overlap
     # no step at the seam and no dark halo at the borders: every pixel keeps the constant within rounding
     assert np.abs(pano.astype(int) - 137).max() <= 1
@@ -177,21 +181,21 @@ def test_blending_is_seamless_on_constant_brightness(blender):
 
 def test_gain_compensation_equalises_an_exposure_step():
     w = _two_constant(100, 130)
-    gains = blending.gain_compensation(w)
+    gains = panorama.gain_compensation(w)
     # sigma_n = 10 pulls the overlap means together while sigma_g = 0.1 keeps gains near 1; with equal overlap and
     # prior weights the two balance at a step of about 8 grey levels (the same objective as OpenCV's GainCompensator)
     assert 1.0 < gains[0] < 1.15 and 0.85 < gains[1] < 1.0
     assert abs(gains[0] * 100 - gains[1] * 130) < 10.0
-    assert blending.overlap_difference(w, gains) < 10.0 < 29.0 < blending.overlap_difference(w)
-    pano, _, _ = blending.compose(w, "multiband", 5, gain=True)
+    assert panorama.overlap_difference(w, gains) < 10.0 < 29.0 < panorama.overlap_difference(w)
+    pano, _, _ = panorama.compose(w, "multiband", 5, gain="gain")
     # the remaining step is spread over the blend band: at most 2 grey levels between neighbours
     assert np.abs(np.diff(pano[60, :, 1].astype(int))).max() <= 2
 
 
 def test_multiband_hides_a_step_that_a_hard_seam_shows():
     w = _two_constant(90, 150)
-    labels = blending.seam_labels(w)
-    pano = blending.blend_multiband(w, labels, bands=5)
+    labels = panorama.seam_labels(w)
+    pano = panorama.blend_multiband(w, labels, bands=5)
     # a hard cut would jump by 60 grey levels between neighbours; five bands spread it over ~2^5 pixels
     assert np.abs(np.diff(pano[60, :, 0].astype(int))).max() <= 8
 
@@ -207,9 +211,9 @@ def test_largest_rectangle_matches_brute_force():
                     for x1 in range(x0 + 1, 12):
                         if mask[y0:y1, x0:x1].all():
                             best = max(best, (y1 - y0) * (x1 - x0))
-        x, y, w, h = blending.largest_rectangle(mask)
+        x, y, w, h = panorama.largest_rectangle(mask)
         assert w * h == best and mask[y:y + h, x:x + w].all()
-    assert blending.largest_rectangle(np.zeros((4, 4), bool)) == (0, 0, 0, 0)
+    assert panorama.largest_rectangle(np.zeros((4, 4), bool)) == (0, 0, 0, 0)
 
 
 def test_plane_projection_refuses_views_beyond_180_degrees():
@@ -217,8 +221,8 @@ def test_plane_projection_refuses_views_beyond_180_degrees():
     G = [np.eye(3), panorama.normalize_det(K @ _rot_y(1.7) @ np.linalg.inv(K))]
     imgs = [np.zeros((150, 200, 3), np.uint8)] * 2
     with pytest.raises(EstimationError, match="cannot hold; use projection cylindrical or spherical"):
-        warping.warp_images(imgs, G, "plane", 100.0, (200, 150), 100.0)
-    w = warping.warp_images(imgs, G, "cylindrical", 100.0, (200, 150), 100.0)
+        panorama.warp.warp_images(imgs, G, "plane", 100.0, (200, 150), 100.0)
+    w = panorama.warp.warp_images(imgs, G, "cylindrical", 100.0, (200, 150), 100.0)
     assert w.size[0] > 300
 
 
@@ -241,7 +245,7 @@ def test_stitch_cli_json(tmp_path, views, capsys):
     # the reported homography of the reference view (input position 2, "v1.png") maps its centre into the panorama where
     # the panorama shows that same pixel
     H = np.array(res["homographies"][2])
-    x, y = warping.apply_h(H, np.array([[160.0, 120.0]]))[0]
+    x, y = panorama.warp.apply_h(H, np.array([[160.0, 120.0]]))[0]
     patch = pano[int(round(y)) - 10:int(round(y)) + 10, int(round(x)) - 10:int(round(x)) + 10].astype(int)
     assert np.abs(patch - imgs[1][110:130, 150:170].astype(int)).mean() < 6
 
@@ -268,15 +272,15 @@ def test_validation_errors(views):
     with pytest.raises(ValueError, match="`projection` must be one of"):
         PanoramaWarpParams(projection="fisheye")
     with pytest.raises(ValueError, match="`projection` must be one of"):
-        warping.check_projection("fisheye")
+        panorama.warp.check_projection("fisheye")
     with pytest.raises(ValueError, match="`blender` must be one of"):
         PanoramaBlendParams(blender="average")
     with pytest.raises(ValueError, match="`blender` must be one of"):
-        blending.compose(_two_constant(1, 1), "average", 5, True)
+        panorama.compose(_two_constant(1, 1), "average", 5, True)
     with pytest.raises(ValueError, match=r"`bands` must be in \[1, 12\]"):
         PanoramaBlendParams(bands=0)
     with pytest.raises(ValueError, match=r"`bands` must be an integer in \[1, 12\]"):
-        blending.blend_multiband(_two_constant(1, 1), np.zeros((120, 320), np.int16), 13)
+        panorama.blend_multiband(_two_constant(1, 1), np.zeros((120, 320), np.int16), 13)
     with pytest.raises(ValueError, match="`refine` must be one of"):
         PanoramaHomographiesParams(refine="bundle")
     with pytest.raises(ValueError, match=r"`ratio` must be in \(0.0, 1.0\]"):
@@ -296,11 +300,11 @@ def test_validation_errors(views):
     with pytest.raises(ValueError, match=r"`max_features` must be in \[1, 1000000\]"):
         PanoramaFeaturesParams(max_features=0)
     with pytest.raises(ValueError, match="`mask` must be 2-D"):
-        blending.largest_rectangle(np.zeros((2, 2, 2)))
+        panorama.largest_rectangle(np.zeros((2, 2, 2)))
     with pytest.raises(ValueError, match="`focal` must be positive"):
-        warping.warp_images(imgs, [np.eye(3)] * 3, "cylindrical", 0.0, VIEW, 10.0)
+        panorama.warp.warp_images(imgs, [np.eye(3)] * 3, "cylindrical", 0.0, VIEW, 10.0)
     with pytest.raises(EstimationError, match="canvas would be .* max_canvas_megapix"):
-        warping.warp_images(imgs, [np.eye(3)] * 3, "plane", 1.0, VIEW, 0.01)
+        panorama.warp.warp_images(imgs, [np.eye(3)] * 3, "plane", 1.0, VIEW, 0.01)
     graph = panorama.MatchGraph([VIEW, VIEW], np.zeros((2, 2), int), np.zeros((2, 2), int), np.zeros((2, 2)))
     with pytest.raises(ValueError, match="`refine` must be one of"):
         panorama.register(graph, refine="bundle", max_points_per_pair=10)
@@ -313,9 +317,9 @@ def test_gains_lower_the_ghosting_measure_on_real_views():
     pano = panorama.stitch(imgs, rng=0)
     assert pano.mask.all()
     comp = panorama.compose_inputs(imgs, pano.registration, [(i.shape[1], i.shape[0]) for i in imgs], -1)
-    w = warping.warp_images(comp.images, comp.G, "plane", comp.focal, comp.ref_size, 10.0)
+    w = panorama.warp.warp_images(comp.images, comp.G, "plane", comp.focal, comp.ref_size, 10.0)
     # exposure differences dominate the raw overlap difference; gain compensation removes most of it
-    assert blending.overlap_difference(w, blending.gain_compensation(w)) < 0.5 * blending.overlap_difference(w)
+    assert panorama.overlap_difference(w, panorama.gain_compensation(w)) < 0.5 * panorama.overlap_difference(w)
 
 
 def _graph(imgs, candidates):
@@ -337,7 +341,7 @@ def test_candidate_prefilter_skips_pairs_but_keeps_the_edges(views):
 def test_connectivity_repair_matches_skipped_bridges(views, monkeypatch):
     imgs, _ = views
     # a prefilter that misses the link to view 2: the repair must match a skipped pair joining the two groups
-    monkeypatch.setattr(panorama, "candidate_pairs", lambda feats, ratio, c: ([(0, 1)], {(0, 2): 9, (1, 2): 3}))
+    monkeypatch.setattr(importlib.import_module("cvpipe.panorama.match"), "candidate_pairs", lambda feats, ratio, c: ([(0, 1)], {(0, 2): 9, (1, 2): 3}))
     graph = _graph(imgs, candidates=1)
     assert (1, 2) in graph.edges and (0, 1) in graph.edges
     assert panorama.register(graph, refine="none", max_points_per_pair=50).used == (0, 1, 2)
@@ -367,25 +371,25 @@ def _sift_like(rng, n, d=128):
     return rng.integers(0, 256, (n, d)).astype(np.float32)
 
 
-@pytest.mark.parametrize("block", [panorama.DISTANCE_BLOCK, 4000])
+@pytest.mark.parametrize("block", [matching.DISTANCE_BLOCK, 4000])
 def test_nearest_two_and_ratio_matches_equal_brute_force(block, monkeypatch):
-    monkeypatch.setattr(panorama, "DISTANCE_BLOCK", block)  # 4000 entries: the query in blocks of 10 rows
+    monkeypatch.setattr(matching, "DISTANCE_BLOCK", block)  # 4000 entries: the query in blocks of 10 rows
     rng = np.random.default_rng(0)
     q, t = _sift_like(rng, 300), _sift_like(rng, 400)
     t[:50] = q[:50] + rng.integers(-3, 4, (50, 128))  # 50 true matches among random descriptors
     d = ((q.astype(np.float64)[:, None, :] - t[None, :, :]) ** 2).sum(-1)
     order = np.sort(d, axis=1)
-    nearest, d1, d2 = panorama.nearest_two(q, t)
+    nearest, d1, d2 = matching.nearest_two(q, t)
     assert np.array_equal(nearest, np.argmin(d, axis=1))
     # squared distances of ~1e6 from a float32 product: within 1e-5 relative of the float64 ones
     np.testing.assert_allclose(d1, order[:, 0], rtol=1e-5)
     np.testing.assert_allclose(d2, order[:, 1], rtol=1e-5)
-    pairs = panorama.ratio_matches(q, t, 0.8)
+    pairs = matching.ratio_matches(q, t, 0.8)
     keep = np.sqrt(order[:, 0]) < 0.8 * np.sqrt(order[:, 1])
     assert set(map(tuple, pairs.tolist())) == {(i, int(np.argmin(d[i]))) for i in np.nonzero(keep)[0]}
     assert {(i, i) for i in range(50)} <= set(map(tuple, pairs.tolist()))
     assert np.all(np.diff(d[pairs[:, 0], pairs[:, 1]]) >= 0)  # best first, like MatchIndex.query
-    assert panorama.ratio_matches(q[:0], t, 0.8).shape == (0, 2)
+    assert matching.ratio_matches(q[:0], t, 0.8).shape == (0, 2)
 
 
 @pytest.mark.parametrize("binary", [False, True])
@@ -412,7 +416,7 @@ def _exact_correspondences(G, sizes, edges, rng):
     for i, j in edges:
         w, h = sizes[i]
         src = rng.uniform([0, 0], [w - 1, h - 1], (400, 2))
-        dst = warping.apply_h(np.linalg.inv(G[j]) @ G[i], src)
+        dst = panorama.warp.apply_h(np.linalg.inv(G[j]) @ G[i], src)
         inside = (dst[:, 0] >= 0) & (dst[:, 0] < sizes[j][0]) & (dst[:, 1] >= 0) & (dst[:, 1] < sizes[j][1])
         H = np.linalg.inv(G[j]) @ G[i]
         out[(i, j)] = panorama.Edge(i, j, H / H[2, 2], src[inside], dst[inside], 5.0)
@@ -435,14 +439,14 @@ def test_refine_homographies_recovers_known_homographies_from_a_perturbed_start(
         assert _corner_error(np.linalg.inv(G[a]) @ refined[a], np.eye(3), sizes[a]) < 1e-3
 
 
-@pytest.mark.parametrize("projection", warping.PROJECTIONS)
+@pytest.mark.parametrize("projection", panorama.warp.PROJECTIONS)
 def test_canvas_maps_from_row_and_column_equal_the_full_grid(projection):
     G = np.array([[1.01, 0.02, 300], [-0.01, 0.99, -40], [2e-5, 1e-5, 1.0]])
     u = np.arange(-200, 900, 7, dtype=np.float32)
     v = np.arange(-100, 600, 5, dtype=np.float32)
-    x, y, ok = warping.canvas_to_image(u[None, :], v[:, None], G, projection, 700.0, (640, 480))
+    x, y, ok = panorama.warp.canvas_to_image(u[None, :], v[:, None], G, projection, 700.0, (640, 480))
     U, V = np.meshgrid(u.astype(np.float64), v.astype(np.float64))
-    xe, ye, oke = warping.canvas_to_image(U, V, G, projection, 700.0, (640, 480))
+    xe, ye, oke = panorama.warp.canvas_to_image(U, V, G, projection, 700.0, (640, 480))
     assert x.shape == U.shape and x.dtype == np.float32 and np.array_equal(ok, oke)
     # float32 maps of coordinates up to ~1000 px: a few 1e-4 px of rounding
     assert np.abs(x - xe)[ok].max() < 2e-3 and np.abs(y - ye)[ok].max() < 2e-3
@@ -453,9 +457,9 @@ def test_multiband_keeps_pixels_far_from_the_seam_exact():
     a = rng.integers(0, 256, (120, 160, 3)).astype(np.uint8)
     b = rng.integers(0, 256, (120, 160, 3)).astype(np.uint8)
     full = np.full((120, 160), 255, np.uint8)
-    w = warping.Warped([a, b], [full, full.copy()], [(0, 0), (100, 0)], (260, 120), (0, 0))
-    labels = blending.seam_labels(w)
-    pano = blending.blend_multiband(w, labels, 3)
+    w = panorama.warp.Warped([a, b], [full, full.copy()], [(0, 0), (100, 0)], (260, 120), (0, 0))
+    labels = panorama.seam_labels(w)
+    pano = panorama.blend_multiband(w, labels, 3)
     canvas = [np.zeros((120, 260, 3), np.uint8) for _ in range(2)]
     canvas[0][:, :160], canvas[1][:, 100:] = a, b
     # 3 bands: a seam's influence spreads over ~2 * (2 + 4 + 8) px; beyond 32 px of any other image's region each
@@ -503,12 +507,12 @@ def test_refit_drops_imprecise_matches_and_recovers_the_homography():
     # over the right half: 200 precise matches (0.2 px noise), 150 imprecise ones displaced by 2.2-2.8 px in random
     # directions (inside the 3 px RANSAC threshold, so the first fit keeps them), and 100 gross outliers
     src = rng.uniform([320, 0], [640, 480], (450, 2))
-    dst = warping.apply_h(H_true, src)
+    dst = panorama.warp.apply_h(H_true, src)
     dst[:200] += rng.normal(0, 0.2, (200, 2))
     angle = rng.uniform(0, 2 * np.pi, 150)
     dst[200:350] += rng.uniform(2.2, 2.8, 150)[:, None] * np.column_stack([np.cos(angle), np.sin(angle)])
     dst[350:] = rng.uniform([0, 0], [640, 480], (100, 2))
-    first = panorama.find_homography(src, dst, threshold=3.0, rng=0)
+    first = find_homography(src, dst, threshold=3.0, rng=0)
     H, keep = panorama.refit(src, dst, first.H, first.inliers, 1.0, 10, size, rng=0)
     # 1 px is 5 sigma of the precise matches' noise and well below the imprecise ones' 2.2 px
     assert keep[:200].mean() > 0.95 and keep[200:350].mean() < 0.1 and not keep[350:].any()
@@ -571,6 +575,13 @@ def test_stages_on_a_folder_with_partial_truth(tmp_path, views, distractor, monk
     _run_stage("panorama_warp", monkeypatch, images=data, homographies=out / "homographies", out=out / "warp",
                params=params)
     _run_stage("panorama_blend", monkeypatch, warp=out / "warp", out=out / "blend", params=params)
+    # a block compensator: its record shows each image's mean gain per channel
+    blocks = tmp_path / "params_blocks.yaml"
+    blocks.write_text(params.read_text().replace("gain_compensation: gain ", "gain_compensation: channel_blocks "))
+    _run_stage("panorama_blend", monkeypatch, warp=out / "warp", out=out / "blend_blocks", params=blocks)
+    gains = np.array(io.load_json(out / "blend_blocks" / "room.json")["gains"])
+    assert gains.shape == (3, 3) and np.all(np.abs(gains - 1) < 0.3)
+    assert np.array(io.load_json(out / "blend" / "room.json")["gains"]).shape == (3,)
     _run_stage("panorama_crop", monkeypatch, blend=out / "blend", out=out / "pano", params=params)
     _run_stage("panorama_opencv_stitcher", monkeypatch, images=data, out=out / "opencv", params=params)
     report = dict(images=data, features=out / "features", homographies=out / "homographies", blend=out / "blend",
@@ -623,3 +634,120 @@ def test_find_panorama_truth_is_optional_per_set_and_image(tmp_path, views):
     io.save_json(tmp_path / "truth.json", {"sets": [{"name": "a", "images": ["v0.jpg"], "H": [[1, 2]]}]})
     with pytest.raises(InputError, match=r"truth.json: field `sets\[0\].H\[0\]` must be"):
         datasets.find_panorama(tmp_path)
+
+
+# ---- exposure compensation kinds (OpenCV's compensators: gain, channels, blocks, channel_blocks) ----
+
+#: per-channel (B, G, R) gain of the second view against the first: a colour cast like exposure_error's sky
+CAST = np.array([1.0, 0.8, 1.2])
+LEFT, RIGHT = (slice(None), slice(0, 80)), (slice(None), slice(220, 300))  # each view alone, away from the seam
+
+
+@pytest.fixture(scope="module")
+def scene() -> np.ndarray:
+    """A 300x160 photo darkened to 60 % (+20) so that no value scaled by ``CAST`` saturates, float64."""
+    return fit(photo("astronaut"), 300, 160).astype(np.float64) * 0.6 + 20
+
+
+def _cast_pair(scene: np.ndarray, gain_of_row=None) -> panorama.Warped:
+    """Two 160x200 crops of ``scene`` overlapping over 100 columns; the second one's channels scaled by ``CAST``
+    (and by ``gain_of_row(y)`` per row when given)."""
+    a, b = scene[:, :200], scene[:, 100:] * CAST
+    if gain_of_row is not None:
+        b = b * gain_of_row(np.arange(160))[:, None, None]
+    full = np.full((160, 200), 255, np.uint8)
+    views = [np.clip(v + 0.5, 0, 255).astype(np.uint8) for v in (a, b)]
+    return panorama.Warped(views, [full, full.copy()], [(0, 0), (100, 0)], (300, 160), (0, 0))
+
+
+def _seam_cast(left: np.ndarray, right: np.ndarray, scene: np.ndarray) -> float:
+    """Colour cast between the two sides of the seam: the largest relative difference of the (B, G, R) shares of the
+    right side's mean colour and the left side's, each first divided by the shares of the same part of ``scene`` (so
+    the scene's own colours cancel). 0 for views that differ by an exposure only, ~0.2 for ``CAST``."""
+    def shares(img, truth):
+        m, t = (x.reshape(-1, 3).astype(np.float64).mean(0) for x in (img, truth))
+        return (m / m.sum()) / (t / t.sum())
+
+    return float(np.abs(shares(right, scene[RIGHT]) / shares(left, scene[LEFT]) - 1).max())
+
+
+def test_channel_gains_recover_a_per_channel_cast(scene):
+    w = _cast_pair(scene)
+    # a negligible prior (sigma_g = 1000) leaves the data term alone: the overlaps' channel means are equalised, so
+    # g_b / g_a per channel = 1 / CAST; 1 % covers the uint8 rounding of the views (0.5 grey level in ~80)
+    g = panorama.compensation_gains(w, "channels", sigma_g=1e3)
+    np.testing.assert_allclose(g[1] / g[0], 1.0 / CAST, rtol=0.01)
+    # the default prior (sigma_g = 0.1) keeps the gains near 1 and moves every channel the right way
+    g = panorama.compensation_gains(w, "channels")
+    assert np.all(np.abs(g - 1) < 0.2) and np.all(np.sign(g[1] / g[0] - 1) == np.sign(1 / CAST - 1))
+    assert panorama.compensation_gains(w, "gain").shape == (2,)  # one grey gain per image cannot remove a cast
+
+
+def test_channel_gains_leave_no_colour_cast_across_the_seam(scene):
+    w = _cast_pair(scene)
+    before = _seam_cast(w.images[0][:, :80], w.images[1][:, 120:], scene)
+    assert before > 0.15  # CAST moves the G and R shares by ~20 %
+    labels = panorama.seam_labels(w)
+    exact = panorama.blend_multiband(w, labels, 5, panorama.compensation_gains(w, "channels", sigma_g=1e3))
+    # fully equalised channels: both sides of the blend show one colour balance, within 3 % (the gains are within
+    # 1 %, see above, and the coarsest pyramid level, 2^5 px, still mixes the views 70 px away from the seam)
+    assert _seam_cast(exact[LEFT], exact[RIGHT], scene) < 0.03
+    # the default prior balances gains near 1 against equal overlap means (Brown & Lowe's sigma_n = 10, sigma_g =
+    # 0.1): at these ~80 grey levels about half of the cast goes (the 2x2 normal equations per channel give
+    # 0.8 -> ~0.9); a single grey gain removes none of it
+    pano, _, _ = panorama.compose(w, "multiband", 5, "channels")
+    grey, _, _ = panorama.compose(w, "multiband", 5, "gain")
+    assert _seam_cast(pano[LEFT], pano[RIGHT], scene) < 0.65 * before
+    assert _seam_cast(grey[LEFT], grey[RIGHT], scene) > 0.9 * before
+
+
+def test_block_gains_follow_an_exposure_that_varies_across_the_image(scene):
+    # the second view also darkens from top (x1.15) to bottom (x0.85): one gain per channel cannot follow that,
+    # a smooth map of gains over 32-pixel blocks can
+    w = _cast_pair(scene, lambda y: 1.15 - 0.3 * y / 159)
+    kw = {"sigma_g": 1e3}
+    channels = panorama.overlap_difference(w, panorama.compensation_gains(w, "channels", **kw))
+    blocks = panorama.overlap_difference(w, panorama.compensation_gains(w, "channel_blocks", 32, **kw))
+    grey_blocks = panorama.overlap_difference(w, panorama.compensation_gains(w, "blocks", 32, **kw))
+    before = panorama.overlap_difference(w)
+    # (the grey-level difference hardly sees the cast itself: G x0.8 and R x1.2 almost cancel in grey)
+    assert blocks < 0.5 * min(channels, before) and grey_blocks < 0.5 * min(channels, before)
+    maps = panorama.compensation_gains(w, "channel_blocks", 32)
+    assert [m.shape for m in maps] == [(160, 200, 3), (160, 200, 3)]
+    # the second view's map rises from top to bottom (it undoes the darkening), smoothly: no jump between pixels
+    # larger than a block's share of the 0.3 ramp
+    col = maps[1][:, 100, 1]
+    assert col[-1] > col[0] and np.abs(np.diff(col)).max() < 0.3 * 32 / 160
+
+
+def test_gain_choices_are_checked():
+    w = _two_constant(100, 120)
+    with pytest.raises(ValueError, match="`gain_compensation` must be one of"):
+        panorama.compensation_gains(w, "rgb")
+    with pytest.raises(ValueError, match="`gain_block` must be an integer >= 4"):
+        panorama.compensation_gains(w, "blocks", 2)
+    with pytest.raises(ValueError, match="`gain_compensation` must be one of"):
+        PanoramaBlendParams(gain_compensation="rgb")
+    with pytest.raises(ValueError, match="`gain_block` must be in"):
+        PanoramaBlendParams(gain_block=2)
+    assert panorama.compensation_gains(w, "none") is None
+    assert panorama.overlap_difference(w, None) == panorama.overlap_difference(w)
+
+
+def test_bench_seam_colour_difference_separates_brightness_from_cast():
+    from cvpipe.bench import panorama as bench
+
+    labels = np.zeros((100, 400), np.int16)
+    labels[:, 200:] = 1
+    labels[:, :10] = -1  # uncovered border: the sides must stay clear of it
+    left = np.full((100, 200, 3), 120, np.uint8)
+    same = bench.seam_colour_difference(np.hstack([left, left]), labels)
+    assert same["delta_e"] == pytest.approx(0.0, abs=1e-6) and same["rows"] == 25  # the top quarter of the rows
+    # a neutral grey step changes L* only: a clear delta E, no cast (a*, b* of greys are 0 up to float32 rounding)
+    step = bench.seam_colour_difference(np.hstack([left, np.full((100, 200, 3), 160, np.uint8)]), labels)
+    assert step["delta_e"] > 10 and step["delta_ab"] < 0.1
+    # the same brightness with less green on the right: a cast that delta ab shows
+    cast = bench.seam_colour_difference(np.hstack([left, np.full((100, 200, 3), (120, 100, 120), np.uint8)]),
+                                        labels)
+    assert cast["delta_ab"] > 5
+    assert bench.seam_colour_difference(left, np.zeros((100, 200), np.int16)) is None  # no seam

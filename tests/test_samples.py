@@ -83,10 +83,29 @@ def test_defect_truth(built):
 
 def test_stereo_truth(built):
     s = built["stereo"]
-    disp = s.arrays["truth.npz"]["disparity"]
-    assert disp.shape == s.images["left.png"].shape[:2] == s.images["right.png"].shape[:2]
-    assert np.nanmax(disp) < s.truth["max_disp"] and s.truth["max_disp"] % 16 == 0
+    disp = s.arrays["motorcycle/truth.npz"]["disparity"]
+    assert disp.shape == s.images["motorcycle/left.png"].shape[:2] == s.images["motorcycle/right.png"].shape[:2]
+    truth = s.docs["motorcycle/truth.json"]
+    assert np.nanmax(disp) < truth["max_disp"] and truth["max_disp"] % 16 == 0
     assert 0.5 < np.isfinite(disp).mean() < 1.0
+    assert not s.truth  # one folder per pair: no truth.json for the stereo folder itself
+
+
+def test_stereo_unrectified_sample(built):
+    """The unrectified pair: its calib.txt parses for the image size, and the true correspondences carried by
+    H_unrectify are off the same row (so the pipeline must rectify it) by up to the drawn shift and rotation."""
+    from cvpipe import rectify
+
+    s = built["stereo"]
+    calib = rectify.parse_calibration(s.texts["motorcycle_unrectified/calib.txt"], "calib.txt")
+    img = s.images["motorcycle_unrectified/right.png"]
+    calib.check_size((img.shape[1], img.shape[0]))
+    arrays = s.arrays["motorcycle_unrectified/truth.npz"]
+    disp = arrays["disparity"]
+    ys, xs = np.nonzero(np.isfinite(disp))
+    right = rectify.apply_h(arrays["H_unrectify"], np.column_stack([xs - disp[ys, xs], ys]).astype(float))
+    dy = np.abs(right[:, 1] - ys)
+    assert np.median(dy) > 1.0  # clearly not rectified (a rectified pair has dy = 0)
 
 
 def test_panorama_truth_chains(built):

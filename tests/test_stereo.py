@@ -329,8 +329,9 @@ def _stage(cwd, *args):
 
 
 def test_stages_with_and_without_truth(tmp_path, repo_root):
-    """stereo_disparity@{sgm,opencv_bm} and stereo_report on a folder with a pair that has truth (and its own
-    max_disp in truth.json), a pair with only a calib.txt range and a pair that lacks its right image."""
+    """stereo_rectify, stereo_disparity@{sgm,opencv_bm}, stereo_depth and stereo_report on a folder with a pair
+    that has truth (and its own max_disp in truth.json), a pair with a calib.txt (its range, and depth) and a pair
+    that lacks its right image. Both pairs are rectified already, so rectification is a no-op."""
     from cvpipe.report import validate_summary
 
     pairs = tmp_path / "pairs"
@@ -342,17 +343,21 @@ def test_stages_with_and_without_truth(tmp_path, repo_root):
     l2, r2, _ = random_dot_pair(constant(7.0), seed=1)
     io.save_image(pairs / "flat" / "left.png", l2)
     io.save_image(pairs / "flat" / "RIGHT.PNG", r2)
-    (pairs / "flat" / "calib.txt").write_text("ndisp=16\n")
+    (pairs / "flat" / "calib.txt").write_text("cam0=[100 0 80; 0 100 48; 0 0 1]\ncam1=[100 0 80; 0 100 48; 0 0 1]\n"
+                                              "doffs=0\nbaseline=50\nwidth=160\nheight=96\nndisp=16\n")
     io.save_image(pairs / "lonely" / "left.png", l2)
     (tmp_path / "params.yaml").write_text((repo_root / "params.yaml").read_text())
+    log = _stage(tmp_path, "stages.stereo_rectify", "--pairs", "pairs", "--out", "out/rectified", "--metrics",
+                 "metrics_rectify.json").stdout
+    assert "2 none" in log and "dropped 1: lonely (needs left.<ext> and right.<ext>)" in log
     for method in ("sgm", "opencv_bm"):
-        log = _stage(tmp_path, "stages.stereo_disparity", "--pairs", "pairs", "--method", method, "--out",
-                     f"out/{method}", "--metrics", f"metrics_{method}.json").stdout
-        assert "dropped 1: lonely (needs left.<ext> and right.<ext>)" in log
+        log = _stage(tmp_path, "stages.stereo_disparity", "--pairs", "pairs", "--rectified", "out/rectified",
+                     "--method", method, "--out", f"out/{method}", "--metrics", f"metrics_{method}.json").stdout
+        assert "dropped" not in log  # stereo_rectify recorded the pair it dropped
     run_bytes = (tmp_path / "out/sgm/run.json").read_bytes()
     npy_bytes = (tmp_path / "out/sgm/planes/disparity.npy").read_bytes()
-    _stage(tmp_path, "stages.stereo_disparity", "--pairs", "pairs", "--method", "sgm", "--out", "out/sgm",
-           "--metrics", "metrics_sgm.json")
+    _stage(tmp_path, "stages.stereo_disparity", "--pairs", "pairs", "--rectified", "out/rectified", "--method", "sgm",
+           "--out", "out/sgm", "--metrics", "metrics_sgm.json")
     # a rerun on the same inputs gives the same bytes (DVC keeps the stages after it up to date)
     assert (tmp_path / "out/sgm/run.json").read_bytes() == run_bytes
     assert (tmp_path / "out/sgm/planes/disparity.npy").read_bytes() == npy_bytes
@@ -371,10 +376,18 @@ def test_stages_with_and_without_truth(tmp_path, repo_root):
     assert m["planes"]["bad_2"] == pytest.approx(stereo.evaluate(disp, truth)["bad_2.0"])
     assert m["planes"]["bad_2"] < 0.15
 
-    _stage(tmp_path, "stages.stereo_report", "--pairs", "pairs", "--disparities", "out/sgm", "out/opencv_bm",
-           "--out", "report", "--summary", "summary.json", "--plots", "plots")
+    _stage(tmp_path, "stages.stereo_depth", "--rectified", "out/rectified", "--disparities", "out/sgm", "--out",
+           "out/depth", "--metrics", "metrics_depth.json")
+    _stage(tmp_path, "stages.stereo_report", "--pairs", "pairs", "--rectified", "out/rectified", "--disparities",
+           "out/sgm", "out/opencv_bm", "--depth", "out/depth", "--out", "report", "--summary", "summary.json",
+           "--plots", "plots")
     summary = validate_summary(io.load_json(tmp_path / "summary.json"))
     assert "1 of 2 pairs have a true disparity (planes)" in summary["description"]
+    # flat: constant disparity 7 px, f = 100 px, baseline 50 -> Z = 100 * 50 / 7 = 714.3; the sub-pixel SGM is
+    # good to a few tenths of a pixel there, so the median depth is within 3 %
+    z = np.load(tmp_path / "out/depth/flat/depth.npy", allow_pickle=False)
+    assert np.nanmedian(z) == pytest.approx(100 * 50 / 7, rel=0.03)
+    assert "disparity only for planes" in summary["description"]
     dropped = next(t for t in summary["tables"] if t["title"] == "Not processed")["rows"]
     assert dropped == [["lonely", "needs left.<ext> and right.<ext>"]]  # listed once, not once per method
     with_truth = io.read_image(tmp_path / "report/planes.png")

@@ -6,7 +6,10 @@ from the match graph, "direct", and the pair composed from the global homographi
 :func:`_accuracy`), how consistent the ground truth itself is, the share of empty pixels after our crop, a ghosting
 measure (mean absolute grey difference of the overlapping warped images, after gain compensation) and the time of
 both, measured in the same process, interleaved, after a warm-up run, at the same registration and compose
-resolutions.
+resolutions. What a user waits for is also measured: the whole ``cvpipe stitch`` command in a subprocess (Python
+start-up, imports, numba cache loading, reading, stitching, writing), against ``cv2.Stitcher`` in this process.
+On the sets of :data:`EXPOSURE_SETS` every exposure compensator (:data:`cvpipe.panorama.GAIN_CHOICES`) blends the
+same warped images, and the colour difference across the seam in the sky is measured (:func:`seam_colour_difference`).
 """
 
 from __future__ import annotations
@@ -15,6 +18,9 @@ import argparse
 import os
 import re
 import statistics
+import subprocess
+import sys
+import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -22,7 +28,9 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares
 
-from .. import blending, io, panorama, warping
+from .. import io, linalg, panorama
+from ..panorama import report as pictures
+from ..panorama import warp as warping
 from ..errors import EstimationError, InputError
 from ..metrics import corner_error
 from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
@@ -42,6 +50,10 @@ SETS = {
                    ["weir_noise.jpg"]),
     "exposure_error": ("stitching_tutorial/imgs", ["exposure_error_1.jpg", "exposure_error_2.jpg"], []),
 }
+#: sets on which every exposure compensator is compared (a sky across the seam, shot at two exposures)
+EXPOSURE_SETS = ("exposure_error",)
+#: share of the panorama's rows, from the top, where :func:`seam_colour_difference` measures (the sky)
+SKY_ROWS = 0.25
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -174,6 +186,73 @@ def _gt_consistency(gt: dict, sizes: list) -> float | None:
     return float(np.median(errs)) if errs else None
 
 
+def seam_colour_difference(pano: np.ndarray, labels: np.ndarray, rows: float = SKY_ROWS,
+                           near: tuple[int, int] = (24, 120)) -> dict | None:
+    """Colour difference across the seam in the top ``rows`` share of the panorama (its sky, in the sets used).
+
+    Per row, the first place where the source image changes (``labels``, from :func:`cvpipe.panorama.seam_labels`)
+    is the seam; the pixels ``near[0]`` to ``near[1]`` px left of it and right of it are the two sides. Returns the
+    CIELAB difference of the two sides' mean colours, ``delta_e`` (all of L*a*b*) and ``delta_ab`` (a*, b* only:
+    the colour cast, without the brightness step), and the number of rows used; None when no row has a seam with
+    both sides covered.
+    """
+    import cv2
+
+    left, right, used = [], [], 0
+    for r in range(int(rows * labels.shape[0])):
+        lab = labels[r]
+        step = np.flatnonzero((lab[:-1] != lab[1:]) & (lab[:-1] >= 0) & (lab[1:] >= 0))
+        if not len(step):
+            continue
+        c = int(step[0]) + 1
+        a, b = slice(c - near[1], c - near[0]), slice(c + near[0], c + near[1])
+        if c - near[1] < 0 or c + near[1] > lab.size or (lab[a] < 0).any() or (lab[b] < 0).any():
+            continue
+        left.append(pano[r, a])
+        right.append(pano[r, b])
+        used += 1
+    if not used:
+        return None
+    mean = [cv2.cvtColor(np.concatenate(x)[None].astype(np.float32) / 255, cv2.COLOR_BGR2Lab)[0].mean(0)
+            for x in (left, right)]
+    d = mean[0] - mean[1]
+    return {"delta_e": float(np.linalg.norm(d)), "delta_ab": float(np.linalg.norm(d[1:])), "rows": used}
+
+
+def _compare_exposure(w, name: str, out: str | None) -> dict:
+    """Every compensator on the same warped images: the seam's colour difference in the sky and the blend time; with
+    ``out``, ``<name>_sky_<mode>.jpg`` (the sky around the seam) and ``<name>_sky.png`` (all of them side by side,
+    in the order of :data:`cvpipe.panorama.GAIN_CHOICES`)."""
+    labels = panorama.seam_labels(w)
+    found, crops = {}, []
+    for mode in panorama.GAIN_CHOICES:
+        t = time.perf_counter()
+        pano, _, _ = panorama.compose(w, "multiband", PanoramaBlendParams().bands, mode)
+        found[mode] = {"seconds": time.perf_counter() - t, **(seam_colour_difference(pano, labels) or {})}
+        if out:
+            top = int(SKY_ROWS * labels.shape[0])
+            seam = np.flatnonzero(panorama.seam_lines(labels)[:top].any(axis=0))
+            c = int(np.median(seam)) if len(seam) else labels.shape[1] // 2
+            crop = pano[:top, max(0, c - 2 * top):c + 2 * top]
+            io.save_image(Path(out) / f"{name}_sky_{mode}.jpg", crop, 90)
+            crops.append(crop)
+    if out:
+        io.save_image(Path(out) / f"{name}_sky.png", pictures.side_by_side(crops, 240, max_width=2400))
+    return found
+
+
+def _run_command(paths: list[Path], projection: str, out: Path) -> float:
+    """Wall time of the whole ``cvpipe stitch`` command on ``paths`` in a fresh Python process, seconds."""
+    cmd = [sys.executable, "-m", "cvpipe.cli", "-q", "stitch", *map(str, paths), "-o", str(out),
+           "--projection", projection]
+    t = time.perf_counter()
+    done = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, check=False)
+    seconds = time.perf_counter() - t
+    if done.returncode not in (0, 1):  # 1: no panorama, which the in-process run reports as well
+        raise InputError(f"`cvpipe stitch` failed on {paths[0].parent}: {done.stderr.strip()[-300:]}")
+    return seconds
+
+
 def _run_ours(images, cfg):
     try:
         return panorama.stitch(images, **cfg, rng=0), None
@@ -194,8 +273,8 @@ def run(args: argparse.Namespace) -> int:
     cfg = {"features": feats, "matching": match, "homographies": homs, "warp": warp,
            "blend": PanoramaBlendParams()}
     t0 = time.perf_counter()
-    blending.largest_rectangle(np.ones((4, 4), bool))  # numba: load or compile once, timed on its own
-    panorama._cholesky_solve(np.eye(2), np.ones(2))
+    panorama.largest_rectangle(np.ones((4, 4), bool))  # numba: load or compile once, timed on its own
+    linalg.solve_spd(np.eye(2), np.ones(2))
     compile_seconds = time.perf_counter() - t0
     results = []
     for name in args.sets:
@@ -207,18 +286,23 @@ def run(args: argparse.Namespace) -> int:
         sizes = [(im.shape[1], im.shape[0]) for im in images]
         ours, err = _run_ours(images, cfg)  # warm-up run, also the result reported
         cv = panorama.opencv_stitch(images, feats.work_megapix, warp.compose_megapix, match.min_confidence)
-        t_ours, t_cv = [], []
-        for _ in range(args.repeat):  # interleaved, so both see the same machine load
-            t = time.perf_counter()
-            _run_ours(images, cfg)
-            t_ours.append(time.perf_counter() - t)
-            t = time.perf_counter()
-            panorama.opencv_stitch(images, feats.work_megapix, warp.compose_megapix, match.min_confidence)
-            t_cv.append(time.perf_counter() - t)
+        t_ours, t_cv, t_cmd = [], [], []
+        with tempfile.TemporaryDirectory() as tmp:
+            _run_command(paths, args.projection, Path(tmp) / "pano.png")  # warm-up: the numba cache on disk
+            for _ in range(args.repeat):  # interleaved, so all three see the same machine load
+                t = time.perf_counter()
+                _run_ours(images, cfg)
+                t_ours.append(time.perf_counter() - t)
+                t = time.perf_counter()
+                panorama.opencv_stitch(images, feats.work_megapix, warp.compose_megapix, match.min_confidence)
+                t_cv.append(time.perf_counter() - t)
+                t_cmd.append(_run_command(paths, args.projection, Path(tmp) / "pano.png"))
         row = {"set": name, "images": len(files), "ours_ok": ours is not None, "ours_error": err,
                "opencv_status": cv[0], "opencv_used": [files[k] for k in cv[2]],
-               "ours_seconds": statistics.median(t_ours), "opencv_seconds": statistics.median(t_cv)}
+               "ours_seconds": statistics.median(t_ours), "opencv_seconds": statistics.median(t_cv),
+               "command_seconds": statistics.median(t_cmd)}
         row["time_ratio"] = row["ours_seconds"] / row["opencv_seconds"]
+        row["command_ratio"] = row["command_seconds"] / row["opencv_seconds"]
         if ours is not None:
             reg = ours.registration
             dropped = {files[k]: why for k, why in reg.dropped}
@@ -229,7 +313,9 @@ def run(args: argparse.Namespace) -> int:
                                            warp.compose_megapix)
             w = warping.warp_images(comp.images, comp.G, warp.projection, comp.focal, comp.ref_size,
                                     warp.max_canvas_megapix)
-            row["ghosting"] = blending.overlap_difference(w, blending.gain_compensation(w))
+            row["ghosting"] = panorama.overlap_difference(w, panorama.gain_compensation(w))
+            if name in EXPOSURE_SETS:
+                row["exposure"] = _compare_exposure(w, name, args.out)
             if folder.startswith("adobe"):
                 gt = _gt_pairs(root / folder, files)
                 row.update(_accuracy(ours, gt, sizes), gt_self_consistency=_gt_consistency(gt, sizes),
@@ -246,6 +332,8 @@ def run(args: argparse.Namespace) -> int:
         "work_megapix": feats.work_megapix, "compose_megapix": warp.compose_megapix,
         "all_stitched": all(r["ours_ok"] for r in results),
         "time_ratio_total": sum(r["ours_seconds"] for r in results) / sum(r["opencv_seconds"] for r in results),
+        "command_ratio_max": max(r["command_ratio"] for r in results),
+        "load_average": list(os.getloadavg()),
     }
     adobe = [r for r in results if r.get("corner_error_median") is not None]
     if adobe:
@@ -261,7 +349,8 @@ def run(args: argparse.Namespace) -> int:
           f"resolution, median of {args.repeat} interleaved runs; numba load/compile {compile_seconds:.2f} s")
     print(f"{'set':15s} {'ours':>5s} {'cv2':>28s} {'used':>5s} {'direct px':>9s} {'dir/comp':>8s} {'corner px':>9s} "
           f"{'adj px':>7s} "
-          f"{'ovl px':>7s} {'empty':>6s} {'ghost':>6s} {'ours s':>7s} {'cv2 s':>6s} {'ratio':>5s}")
+          f"{'ovl px':>7s} {'empty':>6s} {'ghost':>6s} {'ours s':>7s} {'cv2 s':>6s} {'ratio':>5s} {'cmd s':>6s} "
+          f"{'cmd/cv2':>7s}")
     fmt = (lambda v, f: "-" if v is None else format(v, f))
     for r in results:
         print(f"{r['set']:15s} {str(r['ours_ok']):>5s} {r['opencv_status'] + ' ' + str(len(r['opencv_used'])):>28s} "
@@ -271,8 +360,18 @@ def run(args: argparse.Namespace) -> int:
               f"{fmt(r.get('corner_error_adjacent_median'), '.2f'):>7s} "
               f"{fmt(r.get('overlap_error_median'), '.2f'):>7s} "
               f"{fmt(r.get('empty_share'), '.3f'):>6s} {fmt(r.get('ghosting'), '.2f'):>6s} "
-              f"{r['ours_seconds']:7.2f} {r['opencv_seconds']:6.2f} {r['time_ratio']:5.2f}")
+              f"{r['ours_seconds']:7.2f} {r['opencv_seconds']:6.2f} {r['time_ratio']:5.2f} "
+              f"{r['command_seconds']:6.2f} {r['command_ratio']:7.2f}")
         for f, why in r.get("dropped", {}).items():
             print(f"{'':15s} dropped {f}: {why}")
-    print(f"total time ratio ours / cv2.Stitcher: {summary['time_ratio_total']:.2f}")
+    print(f"total time ratio ours / cv2.Stitcher: {summary['time_ratio_total']:.2f}; the `cvpipe stitch` command "
+          f"(subprocess, imports included) / cv2.Stitcher in this process: at most "
+          f"{summary['command_ratio_max']:.2f}; load average {' '.join(f'{v:.1f}' for v in summary['load_average'])}")
+    for r in results:
+        if r.get("exposure"):
+            print(f"{r['set']}: colour difference across the seam in the top {SKY_ROWS:.0%} of the rows (CIELAB; "
+                  f"delta ab = colour cast without the brightness step)")
+            for mode, e in r["exposure"].items():
+                print(f"  {mode:15s} delta E {fmt(e.get('delta_e'), '6.2f')}  delta ab {fmt(e.get('delta_ab'), '6.2f')}"
+                      f"  blend {e['seconds']:.2f} s")
     return 0

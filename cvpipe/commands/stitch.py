@@ -15,7 +15,7 @@ EXAMPLE = "cvpipe stitch data/samples/panorama/coffee/*.jpg -o pano.png --projec
 
 _F, _M, _W, _B = PanoramaFeaturesParams(), PanoramaMatchParams(), PanoramaWarpParams(), PanoramaBlendParams()
 _H = PanoramaHomographiesParams()
-#: choices: ``cvpipe.warping.PROJECTIONS`` and ``cvpipe.features.DETECTORS`` keys (a test keeps them equal)
+#: choices: ``cvpipe.panorama.warp.PROJECTIONS`` and ``cvpipe.features.DETECTORS`` keys (a test keeps them equal)
 PROJECTIONS = ("plane", "cylindrical", "spherical")
 DETECTORS = ("akaze", "brisk", "orb", "sift")
 REFINE = ("auto", "homography", "rotation", "none")
@@ -79,9 +79,9 @@ def _compose_within_budget(images: list, compose_megapix: float) -> float:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from .. import blending, homography, io
+    from .. import homography, io, linalg
     from ..errors import EstimationError, InputError
-    from ..panorama import stitch
+    from ..panorama import _kernels, stitch
 
     # before any work: a panorama that cannot be written must not cost the stitching first
     io.check_output_path(args.out, "`-o`", io.IMAGE_WRITE_SUFFIXES)
@@ -111,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
             blend=replace(_B, blender=args.blender))
     except ValueError as exc:
         raise InputError(with_flags(str(exc), _HINTED + ("ratio", "compose_megapix"))) from exc
-    compile_note("panorama", blending, homography)
+    compile_note("panorama", homography, linalg, _kernels)
     try:
         with step(f"stitch {len(images)} images"):
             pano = stitch(images, **params, crop=not args.no_crop, rng=args.seed,

@@ -11,18 +11,23 @@ are parametrisations of the viewing directions of the reference camera ``K = [[f
 For a rotating camera ``G[i] = K R_i K_i^-1``, so the pixel of image ``i`` that sees the reference ray ``r`` is
 ``G[i]^-1 K r``; that product is evaluated directly, which stays valid for rays the reference plane cannot hold
 (beyond 90 degrees from its axis). Sampling is ours (:func:`canvas_to_image` builds the maps), ``cv2.remap`` does
-the bilinear interpolation.
+the bilinear interpolation. :func:`compose_inputs` brings the used images and their homographies to the compose
+resolution first.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import cv2
 import numpy as np
 
-from .errors import EstimationError
+from ..errors import EstimationError
+from .features import rescale_homographies, resize, resized_size, scale_for
+
+if TYPE_CHECKING:
+    from .register import Registration
 
 PROJECTIONS = ("plane", "cylindrical", "spherical")
 
@@ -247,3 +252,30 @@ def warp_images(images: Sequence[np.ndarray], G: Sequence[np.ndarray], projectio
         out_masks.append(mask)
         corners.append((int(box[0]) - ox, int(box[1]) - oy))
     return Warped(out_imgs, out_masks, corners, (W, H), (ox, oy))
+
+
+@dataclass(frozen=True)
+class ComposeInputs:
+    """The used images at the compose resolution with their homographies (image -> reference pixels)."""
+
+    images: list
+    G: list
+    sizes: list
+    focal: float
+    ref_size: tuple
+
+
+def compose_inputs(images: Sequence[np.ndarray], reg: Registration, work_sizes: Sequence[tuple[int, int]],
+                   compose_megapix: float) -> ComposeInputs:
+    """Resize the used images to the compose resolution and re-express the registration there."""
+    used = list(reg.used)
+    full = [(images[a].shape[1], images[a].shape[0]) for a in used]
+    comp_sizes = [resized_size(s, scale_for(s, compose_megapix)) for s in full]
+    ref_pos = used.index(reg.reference)
+    G = rescale_homographies([reg.G[a] for a in used], [work_sizes[a] for a in used], comp_sizes, ref_pos)
+    scale = comp_sizes[ref_pos][0] / work_sizes[reg.reference][0]
+    imgs = []
+    for a, size in zip(used, comp_sizes):
+        img = images[a] if images[a].ndim == 3 else cv2.cvtColor(images[a], cv2.COLOR_GRAY2BGR)
+        imgs.append(resize(img, size))
+    return ComposeInputs(imgs, G, comp_sizes, reg.focal * scale, comp_sizes[ref_pos])

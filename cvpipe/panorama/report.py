@@ -18,11 +18,12 @@ from __future__ import annotations
 
 from typing import Sequence
 
+import cv2
 import numpy as np
 
-from .datasets import PanoramaSet
-from .metrics import corner_error
-from .panorama import rescale_homographies
+from ..datasets import PanoramaSet
+from ..metrics import corner_error
+from .features import rescale_homographies
 
 #: the compared methods, in table order
 METHODS = ("ours", "opencv_stitcher")
@@ -265,3 +266,32 @@ def quality_plot(results: Sequence[dict]) -> list[dict]:
             row["corner_error_px"] = round(float(err), 4) if err is not None and np.isfinite(err) else None
             rows.append(row)
     return rows
+
+
+def overlay_seams(pano: np.ndarray, seams: np.ndarray, color=(0, 0, 255), width: int = 3) -> np.ndarray:
+    """``pano`` with the seam lines drawn over it (``width`` pixels wide) for the report."""
+    k = np.ones((width, width), np.uint8)
+    thick = cv2.dilate(seams.astype(np.uint8), k) > 0
+    out = pano.copy() if pano.ndim == 3 else cv2.cvtColor(pano, cv2.COLOR_GRAY2BGR)
+    out[thick] = color
+    return out
+
+
+def side_by_side(images: Sequence[np.ndarray | None], height: int, gap: int = 8,
+                 max_width: int = 1200) -> np.ndarray:
+    """Images scaled to one ``height`` and put next to each other (a grey box for a missing one), then shrunk
+    to at most ``max_width`` pixels wide."""
+    tiles = []
+    for img in images:
+        if img is None:
+            tiles.append(np.full((height, height, 3), 64, np.uint8))
+            continue
+        img = img if img.ndim == 3 else cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+        w = max(1, int(round(img.shape[1] * height / img.shape[0])))
+        tiles.append(cv2.resize(img, (w, height), interpolation=cv2.INTER_AREA))
+        tiles.append(np.full((height, gap, 3), 255, np.uint8))
+    out = np.hstack(tiles[:-1] if images and images[-1] is not None else tiles)
+    if out.shape[1] > max_width:
+        out = cv2.resize(out, (max_width, max(1, int(out.shape[0] * max_width / out.shape[1]))),
+                         interpolation=cv2.INTER_AREA)
+    return out
