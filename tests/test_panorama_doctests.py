@@ -8,7 +8,8 @@ import importlib
 import pytest
 
 MODULES = ["cvpipe.linalg", "cvpipe.matching", "cvpipe.panorama", "cvpipe.panorama.features",
-           "cvpipe.panorama.register", "cvpipe.panorama.seams", "cvpipe.panorama.blend", "cvpipe.panorama.crop"]
+           "cvpipe.panorama.register", "cvpipe.panorama.seams", "cvpipe.panorama.warp", "cvpipe.panorama.blend",
+           "cvpipe.panorama.crop"]
 
 
 @pytest.mark.parametrize("name", MODULES)
