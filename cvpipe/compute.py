@@ -165,7 +165,7 @@ def cluster(scheduler: str, workers: int | None = None, *, timeout: float = CONN
     try:
         client = Client(s, timeout=timeout)
     except (OSError, TimeoutError, ValueError) as exc:
-        raise ComputeError(f"cannot reach the Dask scheduler at {s} ({name}) within {timeout:g} s: "
+        raise ComputeError(f"cannot reach the Dask scheduler at {s} within {timeout:g} s: "
                            f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
     try:
         yield client

@@ -8,9 +8,9 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from .. import defects, io
+from ..compute import check_scheduler, map_items
 from ..errors import CvpipeError, EstimationError
 from ..features import DETECTORS, detect
 
@@ -36,6 +36,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--pad", type=float, default=_DEFAULTS.regions.pad,
                         help=f"pad the probe boxes by this many px (default {_DEFAULTS.regions.pad:g})")
     parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
+    parser.add_argument("--scheduler", default="", metavar="ADDR",
+                        help="run the probes on Dask: 'local' or a scheduler address tcp://host:port "
+                             "(default: in process)")
 
 
 def params_from_args(args: argparse.Namespace) -> defects.InspectParams:
@@ -56,24 +59,45 @@ def result_dict(probe: str, r: defects.Inspection) -> dict:
             "regions": np.round(r.probe_regions, 2).tolist(), "H": r.registration.H.tolist()}
 
 
+def _read_probes(paths: list[str]):
+    """``(probe, read error)`` per path, lazily: the image travels with the task, a read error fails only its item."""
+    for path in paths:
+        try:
+            yield io.read_image(path, "color"), None
+        except CvpipeError as exc:
+            yield None, exc
+
+
+def inspect_probe(item: tuple, shared: tuple) -> defects.Inspection:
+    """Inspect one probe (an item of :func:`cvpipe.compute.map_items`): ``item`` = (BGR image or None, read error),
+    ``shared`` = (reference gray, reference features, InspectParams)."""
+    probe, error = item
+    if error is not None:
+        raise error
+    ref_gray, ref_feats, params = shared
+    return defects.inspect(ref_gray, io.to_gray(probe), params, reference_features=ref_feats)
+
+
 def run(args: argparse.Namespace) -> int:
     params = params_from_args(args)
     reference = io.read_image(args.reference, "color")
     ref_gray = io.to_gray(reference)
     ref_feats = detect(ref_gray, params.features.detector, params.features.max_features)
     results, failed = [], 0
-    for path in tqdm(args.probes, desc="inspect", disable=None):
-        try:
-            probe = io.read_image(path, "color")
-            r = defects.inspect(ref_gray, io.to_gray(probe), params, reference_features=ref_feats)
-        except CvpipeError as exc:
+    items = map_items(inspect_probe, _read_probes(args.probes), shared=(ref_gray, ref_feats, params),
+                      scheduler=check_scheduler(args.scheduler, "--scheduler"), progress="inspect",
+                      total=len(args.probes))
+    for path, res in zip(args.probes, items):
+        if not res.ok:
             failed += 1
-            print(f"cvpipe: error: {path}: {exc}", file=sys.stderr)
+            print(f"cvpipe: error: {path}: {res.error}", file=sys.stderr)
             results.append({"probe": path, "verdict": None, "score": None, "regions": [], "H": None,
-                            "error": str(exc)})
+                            "error": res.error})
             continue
+        r = res.value
         results.append(result_dict(path, r))
         if args.out:
+            probe = io.read_image(path, "color")
             stem = Path(path).stem
             io.save_image(Path(args.out) / f"{stem}_regions.png", defects.draw_regions(probe, r.probe_regions))
             io.save_image(Path(args.out) / f"{stem}_diff.png", defects.heat_map(r.difference.diff, r.threshold))
