@@ -154,8 +154,10 @@ def cluster(scheduler: str, workers: int | None = None, *, timeout: float = CONN
     if s == "local":
         env = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}), **WORKER_ENV)
         with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
+            # no dashboard, and the scheduler's HTTP endpoints on a free port rather than 8787 (may be taken)
             local = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                                 dashboard_address=None)
+                                 dashboard_address=None, scheduler_kwargs={"dashboard": False,
+                                                                           "dashboard_address": ":0"})
         try:
             with Client(local) as client:
                 yield client
