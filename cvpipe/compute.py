@@ -264,7 +264,8 @@ def _windowed(client, fn, items, shared, with_shared, window, retries, progress,
     next_yield = 0
     next_submit = 0
     exhausted = False
-    ac = as_completed()
+    # results travel with the completion notice (one round trip per item, not two)
+    ac = as_completed(with_results=True, raise_errors=False)
 
     def submit(index: int, item: Any, attempt: int) -> None:
         fut = client.submit(_run_one, fn, item, shared_arg, with_shared, key=f"{run_id}-{index}-{attempt}",
@@ -283,19 +284,19 @@ def _windowed(client, fn, items, shared, with_shared, window, retries, progress,
                 next_submit += 1
             if not pending and next_yield == next_submit:
                 break
-            fut = next(ac)
+            fut, outcome = next(ac)
             index, item, attempt = pending.pop(fut)
-            try:
-                ok, value, etype = fut.result()
-            except Exception as exc:  # noqa: BLE001 - the task itself failed: its worker died or it was cancelled
-                fut.release()
+            lost = isinstance(outcome, BaseException) or fut.status != "finished"
+            fut.release()
+            if lost:
+                # the task itself failed (its worker died and the scheduler gave up on it, or it was cancelled)
                 if attempt <= retries:
                     submit(index, item, attempt + 1)
                     continue
-                done[index] = ItemResult(index, None, f"lost after {attempt} attempts: {exc}",
-                                         type(exc).__name__, attempt)
+                done[index] = ItemResult(index, None, f"lost after {attempt} attempts: {outcome}",
+                                         type(outcome).__name__, attempt)
             else:
-                fut.release()
+                ok, value, etype = outcome
                 done[index] = (ItemResult(index, value, None, None, attempt) if ok
                                else ItemResult(index, None, value, etype, attempt))
             del item
