@@ -8,7 +8,6 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 
 import cv2
@@ -34,9 +33,9 @@ def square_or_fail(x: int, shared: dict) -> int:
     return x * x + shared["offset"]
 
 
-def slow_square(x: int) -> int:
+def slow_square(x: int) -> tuple[int, int]:
     time.sleep(0.15)
-    return x * x
+    return x * x, os.getpid()
 
 
 _KEEP: list = []
@@ -227,22 +226,18 @@ def test_killed_worker_loses_no_item(tmp_path):
     with external_cluster(2, env=env) as ext:
         victim = ext.workers[0]
         got = []
-
-        def kill_soon():
-            time.sleep(1.0)  # 0.15 s items, two workers: about 13 items are done, 2 running, the rest queued
-            victim.send_signal(signal.SIGKILL)
-
-        killer = threading.Thread(target=kill_soon)
-        killer.start()
-        try:
-            for r in map_items(slow_square, range(40), scheduler=ext.address, window=6):
-                got.append(r)
-        finally:
-            killer.join()
-        assert victim.poll() is not None, "the worker was not killed during the run"
+        for r in map_items(slow_square, range(40), scheduler=ext.address, window=6):
+            got.append(r)
+            if r.index == 8:
+                # mid-run: 9 items done, up to 6 submitted (some running on the victim), 25 not yet submitted
+                victim.send_signal(signal.SIGKILL)
+                victim.wait(timeout=10)
     assert [r.index for r in got] == list(range(40))
     assert all(r.ok for r in got), [r.error for r in got if not r.ok]
-    assert [r.value for r in got] == [x * x for x in range(40)]
+    assert [r.value[0] for r in got] == [x * x for x in range(40)]
+    pids = [r.value[1] for r in got]
+    assert victim.pid in pids[:9], "the killed worker had done no work before it was killed"
+    assert victim.pid not in pids[9 + 6:], "items submitted after the kill ran on the dead worker"
 
 
 # ----------------------------------------------------------------------------- CLI batches, byte for byte
