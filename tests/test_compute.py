@@ -280,3 +280,43 @@ def test_hough_batch_identical_serial_local_external(tmp_path, external, capsys)
     assert _cli(base + ["--scheduler", "local"], capsys) == serial
     assert _cli(base + ["--scheduler", external.address], capsys) == serial
 
+
+
+# ----------------------------------------------------------------------------- sharing results through a DVC remote
+
+
+def _dvc(cwd, *args, env=None) -> str:
+    proc = subprocess.run([sys.executable, "-m", "dvc", *args], cwd=cwd, capture_output=True, text=True, env=env)
+    assert proc.returncode == 0, f"dvc {' '.join(args)}: {proc.stdout}{proc.stderr}"
+    return proc.stdout + proc.stderr
+
+
+@pytest.mark.slow
+def test_a_teammate_restores_a_stage_from_the_shared_run_cache(tmp_path, repo_root):
+    """The README recipe: run a stage, ``dvc push --run-cache`` to a local-directory remote; a fresh checkout that
+    never ran it (no dvc.lock) runs ``dvc repro --pull``: the output is restored from the shared run cache and the
+    stage does not run."""
+    remote = tmp_path / "remote"
+    img = np.full((120, 160), 30, np.uint8)
+    cv2.line(img, (5, 10), (150, 110), 230, 2)
+    stage = ("stages:\n  lines:\n    cmd: python -m cvpipe.cli hough a.png --threshold 40 --json > lines.json\n"
+             "    deps: [a.png]\n    outs: [lines.json]\n")
+    # the stage's command must run this checkout's cvpipe
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(repo_root), os.environ.get("PYTHONPATH", "")]))
+    outputs = {}
+    for who in ("me", "teammate"):
+        d = tmp_path / who
+        d.mkdir()
+        cv2.imwrite(str(d / "a.png"), img)
+        (d / "dvc.yaml").write_text(stage)
+        _dvc(d, "init", "--no-scm", "-q")
+        _dvc(d, "remote", "add", "-d", "shared", str(remote))
+        if who == "me":
+            _dvc(d, "repro", env=env)
+            _dvc(d, "push", "--run-cache")
+        else:
+            log = _dvc(d, "repro", "--pull", env=env)
+            # DVC's words for "found in the run cache, outputs checked out, command not run"
+            assert "skipping run" in log, log
+        outputs[who] = (d / "lines.json").read_bytes()
+    assert outputs["teammate"] == outputs["me"] and b'"lines"' in outputs["me"]
