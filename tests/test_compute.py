@@ -320,3 +320,12 @@ def test_a_teammate_restores_a_stage_from_the_shared_run_cache(tmp_path, repo_ro
             assert "skipping run" in log, log
         outputs[who] = (d / "lines.json").read_bytes()
     assert outputs["teammate"] == outputs["me"] and b'"lines"' in outputs["me"]
+
+
+def test_bench_scale_rejects_bad_options(tmp_path, capsys):
+    assert cli.main(["bench", "scale", "--data", str(tmp_path), "--sizes", "ten"]) == 2
+    assert "`--sizes` must be comma-separated integers" in capsys.readouterr().err
+    assert cli.main(["bench", "scale", "--data", str(tmp_path), "--modes", "serial,cloud"]) == 2
+    assert "`--modes` must be a subset of" in capsys.readouterr().err
+    assert cli.main(["bench", "scale", "--data", str(tmp_path)]) == 2
+    assert "pairs.txt: not found" in capsys.readouterr().err
