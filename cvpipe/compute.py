@@ -22,6 +22,7 @@ up on it, it is resubmitted up to ``retries`` times). This module never touches 
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import sys
 import uuid
@@ -73,7 +74,7 @@ class ItemResult:
 
 
 def check_scheduler(scheduler: str, name: str = "compute.scheduler") -> str:
-    """Return ``scheduler`` stripped if it is ``""``, ``"local"`` or a ``scheme://address``; else raise naming ``name``."""
+    """``scheduler`` stripped if it is ``""``, ``"local"`` or a ``scheme://address``; else raise naming ``name``."""
     if not isinstance(scheduler, str):
         raise InputError(f"`{name}` must be a string, got {scheduler!r}")
     s = scheduler.strip()
@@ -156,8 +157,8 @@ def cluster(scheduler: str, workers: int | None = None, *, timeout: float = CONN
         with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
             # no dashboard, and the scheduler's HTTP endpoints on a free port rather than 8787 (may be taken)
             local = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                                 dashboard_address=None, scheduler_kwargs={"dashboard": False,
-                                                                           "dashboard_address": ":0"})
+                                 silence_logs=logging.ERROR, dashboard_address=None,
+                                 scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"})
         try:
             with Client(local) as client:
                 yield client
