@@ -20,6 +20,7 @@ from cvpipe.errors import InputError
 from cvpipe.params import ComputeParams, from_mapping
 
 from test_defects import board, make_probe, motion
+from test_logos import PERSP, _scene, _view, gallery_dir, marks  # noqa: F401 - fixtures used below
 
 
 # ----------------------------------------------------------------------------- item functions (module level: picklable)
@@ -280,6 +281,22 @@ def test_hough_batch_identical_serial_local_external(tmp_path, external, capsys)
     assert _cli(base + ["--scheduler", "local"], capsys) == serial
     assert _cli(base + ["--scheduler", external.address], capsys) == serial
 
+
+
+@pytest.mark.slow
+def test_logo_batch_identical_serial_local_external(tmp_path, gallery_dir, marks, external, capsys):
+    scenes = []
+    for k, brand in enumerate(["brand1", None, "brand0", "brand1"]):
+        p = tmp_path / f"scene_{k}.jpg"
+        cv2.imwrite(str(p), _scene(marks[brand] if brand else None, _view((300 + 10 * k, 240), 0.8, 8 * k, PERSP)))
+        scenes.append(str(p))
+    (tmp_path / "broken.jpg").write_bytes(b"not an image at all")
+    scenes.insert(1, str(tmp_path / "broken.jpg"))
+    base = ["logo", *scenes, "--gallery", str(gallery_dir), "--json"]
+    serial = _cli(base, capsys)
+    assert serial[0] == 2 and '"brand": "brand1"' in serial[1] and "broken.jpg" in serial[2]
+    assert _cli(base + ["--scheduler", "local"], capsys) == serial
+    assert _cli(base + ["--scheduler", external.address], capsys) == serial
 
 
 # ----------------------------------------------------------------------------- sharing results through a DVC remote
