@@ -22,6 +22,7 @@ up on it, it is resubmitted up to ``retries`` times). This module never touches 
 from __future__ import annotations
 
 import contextlib
+import itertools
 import logging
 import os
 import sys
@@ -260,7 +261,7 @@ def _windowed(client, fn, items, shared, with_shared, window, retries, progress,
     run_id = f"{getattr(fn, '__name__', 'item')}-{uuid.uuid4().hex}"
     update, close = _progress_callback(progress, total)
     source = enumerate(items)
-    pending: dict[Any, tuple[int, Any, int]] = {}  # future -> (index, item, attempt)
+    pending: dict[Any, tuple] = {}  # future -> (index, item, attempt, future of the item's data)
     done: dict[int, ItemResult] = {}
     next_yield = 0
     next_submit = 0
@@ -268,31 +269,39 @@ def _windowed(client, fn, items, shared, with_shared, window, retries, progress,
     # results travel with the completion notice (one round trip per item, not two)
     ac = as_completed(with_results=True, raise_errors=False)
 
-    def submit(index: int, item: Any, attempt: int) -> None:
-        fut = client.submit(_run_one, fn, item, shared_arg, with_shared, key=f"{run_id}-{index}-{attempt}",
-                            pure=False)
-        pending[fut] = (index, item, attempt)
-        ac.add(fut)
+    def submit(batch: list[tuple[int, Any, int]]) -> None:
+        # the items' data goes straight to the workers (one scatter per batch). Embedded in the tasks, it went
+        # through the scheduler and was freed late: the driver's peak memory grew ~4x from 10^2 to 10^3 items.
+        datas = client.scatter([item for _, item, _ in batch], hash=False)
+        for (index, item, attempt), data in zip(batch, datas):
+            fut = client.submit(_run_one, fn, data, shared_arg, with_shared, key=f"{run_id}-{index}-{attempt}",
+                                pure=False)
+            pending[fut] = (index, item, attempt, data)
+            ac.add(fut)
 
+    refill = max(1, window // 4)  # scatter in batches: fewer round trips, the window stays nearly full
     try:
         while True:
-            while not exhausted and next_submit - next_yield < window:
-                nxt = next(source, None)
-                if nxt is None:
-                    exhausted = True
-                    break
-                submit(nxt[0], nxt[1], 1)
-                next_submit += 1
+            free = window - (next_submit - next_yield)
+            if not exhausted and free > 0 and (free >= refill or not pending):
+                batch = []
+                for index, item in itertools.islice(source, free):
+                    batch.append((index, item, 1))
+                exhausted = len(batch) < free
+                if batch:
+                    submit(batch)
+                    next_submit += len(batch)
             if not pending and next_yield == next_submit:
                 break
             fut, outcome = next(ac)
-            index, item, attempt = pending.pop(fut)
+            index, item, attempt, data = pending.pop(fut)
+            data.release()
             lost = isinstance(outcome, BaseException) or fut.status != "finished"
             fut.release()
             if lost:
                 # the task itself failed (its worker died and the scheduler gave up on it, or it was cancelled)
                 if attempt <= retries:
-                    submit(index, item, attempt + 1)
+                    submit([(index, item, attempt + 1)])
                     continue
                 done[index] = ItemResult(index, None, f"lost after {attempt} attempts: {outcome}",
                                          type(outcome).__name__, attempt)
@@ -306,8 +315,9 @@ def _windowed(client, fn, items, shared, with_shared, window, retries, progress,
                 next_yield += 1
                 update(next_yield)
     finally:
-        for fut in pending:
+        for fut, (_, _, _, data) in pending.items():
             fut.cancel()
+            data.release()
         if shared_arg is not None:
             shared_arg.release()
         close()
