@@ -31,9 +31,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import defects, io
+from .. import io
 from ..compute import WORKER_ENV, map_items
 from ..errors import InputError
+
+try:  # the defect package (main after issue #18), else the flat module it replaced; both have inspect, InspectParams
+    from .. import defect as defects
+except ImportError:
+    from .. import defects
 
 HELP = "inspection throughput serial vs a Dask LocalCluster vs an external Dask cluster (probes/s, overhead, memory)"
 EXAMPLE = "cvpipe bench scale --data ../shared/data --max-items 200"
