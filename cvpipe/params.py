@@ -710,3 +710,27 @@ SECTIONS.update({
     "stereo.rectify": StereoRectifyParams,
     "stereo.depth": StereoDepthParams,
 })
+
+
+# ---- compute (where per-item work runs; never a parameter of a DVC stage: it does not change any result) ----
+
+
+@dataclass(frozen=True)
+class ComputeParams:
+    """``compute``: where stages run their items (:func:`cvpipe.compute.map_items`).
+
+    ``scheduler`` is ``""`` (in process), ``"local"`` (a Dask LocalCluster of ``workers`` single-threaded processes,
+    0 = one per core) or a Dask scheduler address (``tcp://host:8786``). ``window`` bounds the items in flight
+    (0 = 4 x the cluster's threads).
+    """
+
+    scheduler: str = ""
+    workers: int = 0
+    window: int = 0
+
+    def __post_init__(self):
+        from .compute import check_scheduler
+
+        check_scheduler(self.scheduler, "scheduler")
+        _in_range("workers", self.workers, 0, 4096)
+        _in_range("window", self.window, 0, 1_000_000)
