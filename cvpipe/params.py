@@ -734,3 +734,7 @@ class ComputeParams:
         check_scheduler(self.scheduler, "scheduler")
         _in_range("workers", self.workers, 0, 4096)
         _in_range("window", self.window, 0, 1_000_000)
+
+
+# not listed in any stage's ``params:`` in dvc.yaml: changing it never reruns a stage
+SECTIONS["compute"] = ComputeParams

@@ -4,6 +4,7 @@ scheduler is one line and exit 1, and the window bounds what is held at once."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -349,3 +350,61 @@ def test_bench_scale_rejects_bad_options(tmp_path, capsys):
     assert "`--modes` must be a subset of" in capsys.readouterr().err
     assert cli.main(["bench", "scale", "--data", str(tmp_path)]) == 2
     assert "pairs.txt: not found" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------- a pipeline stage, byte for byte
+
+
+@pytest.mark.slow
+def test_defect_register_stage_identical_serial_local_external(tmp_path, repo_root, external):
+    """The ``defect_register`` stage (``st.map``) gives the same output bytes in process, on a LocalCluster of 2
+    workers and on an external scheduler with 2 workers; ``compute`` is read from the params file only."""
+    import yaml
+
+    from cvpipe import io
+
+    folder = tmp_path / "data"
+    ref = board(11)
+    io.save_image(folder / "reference.png", ref)
+    for k in range(5):
+        part = ref.copy()
+        if k in (1, 3):
+            cv2.circle(part, (100 + 30 * k, 150), 8, (25, 25, 35), -1, cv2.LINE_AA)
+        io.save_image(folder / "probes" / f"probe_{k}.png",
+                      make_probe(part, motion(1.5 * k - 3, 1.0 + 0.01 * k, (4.0 - k, 2.0 * k - 5)), seed=k))
+    io.save_image(folder / "probes" / "blank.png", np.full(ref.shape, 90, np.uint8))  # cannot be registered
+    env = dict(os.environ, PYTHONPATH=str(repo_root))
+    base = yaml.safe_load((repo_root / "params.yaml").read_text())
+
+    def stage(module: str, *args, compute: dict | None = None, cwd=tmp_path) -> subprocess.CompletedProcess:
+        params = dict(base)
+        if compute is not None:
+            params["compute"] = compute
+        else:
+            params.pop("compute", None)  # absent section: in process
+        pfile = cwd / "params.yaml"
+        pfile.write_text(yaml.safe_dump(params))
+        proc = subprocess.run([sys.executable, "-m", module, *map(str, args), "--params", str(pfile)], cwd=cwd,
+                              env=env, capture_output=True, text=True)
+        assert proc.returncode == 0, proc.stderr
+        return proc
+
+    o = tmp_path / "o"
+    stage("stages.features", "--images", folder, "--out", o / "features", "--section", "defect.features")
+    stage("stages.defect_match", "--images", folder, "--features", o / "features", "--out", o / "matches")
+    outputs = {}
+    for mode, compute in {"absent": None, "serial": {"scheduler": "", "workers": 0, "window": 0},
+                          "local": {"scheduler": "local", "workers": 2, "window": 0},
+                          "external": {"scheduler": external.address, "workers": 0, "window": 3}}.items():
+        out = tmp_path / f"register_{mode}"
+        proc = stage("stages.defect_register", "--images", folder, "--features", o / "features", "--matches",
+                     o / "matches", "--out", out, compute=compute)
+        outputs[mode] = ({p.name: p.read_bytes() for p in sorted(out.iterdir())}, proc.stdout.replace(str(out), ""))
+    files, summary = outputs["absent"]
+    # every good probe registered, the blank one dropped (by match or register) and never lost in any mode
+    assert {f"probe_{k}.npz" for k in range(5)} <= set(files) and "registration.json" in files
+    doc = json.loads(files["registration.json"])
+    assert sorted(doc["probes"]) == [f"probe_{k}" for k in range(5)]
+    assert any(d["item"].startswith("blank") for d in doc["dropped"])
+    for mode in ("serial", "local", "external"):
+        assert outputs[mode] == (files, summary), mode  # byte for byte, and the same summary line
