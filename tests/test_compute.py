@@ -17,7 +17,7 @@ import pytest
 
 from cvpipe import cli
 from cvpipe.compute import ComputeError, ItemResult, check_scheduler, cluster, map_items
-from cvpipe.errors import InputError
+from cvpipe.errors import EstimationError, InputError
 from cvpipe.params import ComputeParams, from_mapping
 
 from test_defects import board, make_probe, motion
@@ -408,3 +408,44 @@ def test_defect_register_stage_identical_serial_local_external(tmp_path, repo_ro
     assert any(d["item"].startswith("blank") for d in doc["dropped"])
     for mode in ("serial", "local", "external"):
         assert outputs[mode] == (files, summary), mode  # byte for byte, and the same summary line
+
+
+def half_of_even(x: int) -> int:
+    """x // 2; an odd x is the item's own failure (InputError), a negative one a bug (ZeroDivisionError)."""
+    if x < 0:
+        return 1 // 0
+    if x % 2:
+        raise InputError(f"{x} is odd")
+    return x // 2
+
+
+@pytest.mark.parametrize("scheduler", ["", pytest.param("local", marks=pytest.mark.slow)])
+def test_stage_map_yields_in_order_and_drops_in_input_order(tmp_path, repo_root, scheduler):
+    import argparse
+
+    sys.path.insert(0, str(repo_root))
+    from stages._runner import Stage
+
+    (tmp_path / "params.yaml").write_text(f"compute:\n  scheduler: '{scheduler}'\n  workers: 2\n  window: 2\n")
+    st = Stage("t", argparse.Namespace(params=str(tmp_path / "params.yaml")))
+    items = [0, InputError("b.png: cannot read"), 2, 3, 4, 6, InputError("g.png: empty"), 8]
+    got = list(st.map(half_of_even, items, names=list("abcdefgh")))
+    # the successes in input order, each named; the unread item and the failed one dropped in input order
+    assert got == [("a", 0), ("c", 1), ("e", 2), ("f", 3), ("h", 4)]
+    assert st.dropped == [{"item": "b", "reason": "b.png: cannot read"}, {"item": "d", "reason": "3 is odd"},
+                          {"item": "g", "reason": "g.png: empty"}]
+    # a bug is not an item's failure: it ends the stage (the runner turns it into the exit status)
+    with pytest.raises((ZeroDivisionError, EstimationError)):
+        list(Stage("t", argparse.Namespace(params=str(tmp_path / "params.yaml"))).map(half_of_even, [2, -1]))
+
+
+def test_stage_map_without_compute_section_runs_in_process(tmp_path, repo_root):
+    import argparse
+
+    sys.path.insert(0, str(repo_root))
+    from stages._runner import Stage
+
+    (tmp_path / "params.yaml").write_text("other: {}\n")
+    st = Stage("t", argparse.Namespace(params=str(tmp_path / "params.yaml")))
+    assert list(st.map(half_of_even, [4, 5], names=["x", "y"])) == [("x", 2)]
+    assert st.dropped == [{"item": "y", "reason": "5 is odd"}]
