@@ -5,7 +5,7 @@
 has rank 2, and a correspondence is an inlier when its Sampson distance (the first-order geometric distance of the
 pair to the epipolar variety, in pixels) is at most ``threshold``. The pipeline is
 
-1. Hartley normalization of both point sets (``cvpipe.homography.hartley_normalization``);
+1. Hartley normalization of both point sets (``cvpipe.geometry.hartley_normalization``);
 2. RANSAC over minimal 7-point samples, solved in batches: the 2-D null space of the 7x9 epipolar system, then the
    one to three real roots of the cubic ``det(a F1 + (1 - a) F2) = 0``; samples whose system has rank below 7
    (repeated or collinear points) are skipped. Hypotheses are scored by MSAC (truncated squared Sampson distance)
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import EstimationError, InputError
-from .homography import hartley_normalization
+from .geometry import as_points, collinear, hartley_normalization
 
 #: default iteration cap of :func:`find_fundamental` (7-point samples; ~65 % outliers at confidence 0.999)
 DEFAULT_MAX_ITERS = 5_000
@@ -94,23 +94,8 @@ class FundamentalFit:
 # ----------------------------------------------------------------------------------------------- validation
 
 
-def _as_points(name: str, pts) -> np.ndarray:
-    """(N, 2) float64 copy of ``pts``; accepts OpenCV's (N, 1, 2) layout too."""
-    try:
-        a = np.asarray(pts, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"`{name}` must be a numeric (N, 2) array ({exc})") from exc
-    if a.ndim == 3 and a.shape[1:] == (1, 2):
-        a = a.reshape(-1, 2)
-    if a.ndim != 2 or a.shape[1] != 2:
-        raise InputError(f"`{name}` must have shape (N, 2), got {a.shape}")
-    if not np.isfinite(a).all():
-        raise InputError(f"`{name}` contains NaN or inf")
-    return np.ascontiguousarray(a)
-
-
 def _check_pair(pts1, pts2, minimum: int) -> tuple[np.ndarray, np.ndarray]:
-    p1, p2 = _as_points("pts1", pts1), _as_points("pts2", pts2)
+    p1, p2 = as_points("pts1", pts1), as_points("pts2", pts2)
     if len(p1) != len(p2):
         raise InputError(f"`pts1` and `pts2` must have the same number of points, got {len(p1)} and {len(p2)}")
     if len(p1) < minimum:
@@ -118,9 +103,7 @@ def _check_pair(pts1, pts2, minimum: int) -> tuple[np.ndarray, np.ndarray]:
             f"a fundamental matrix needs at least {minimum} correspondences, got {len(p1)}: the views share too "
             "little (more overlap, more features or a looser ratio test)")
     for name, p in (("pts1", p1), ("pts2", p2)):
-        c = p - p.mean(axis=0)
-        sv = np.linalg.svd(c, compute_uv=False)
-        if sv[0] == 0.0 or sv[1] <= _ALL_COLLINEAR_EPS * sv[0]:
+        if collinear(p, _ALL_COLLINEAR_EPS):
             raise EstimationError(
                 f"all `{name}` points are collinear or coincident, so the fundamental matrix is undetermined; "
                 "supply correspondences spread over the image")
@@ -277,7 +260,7 @@ def seven_point(pts1, pts2) -> list[np.ndarray]:
     EstimationError
         A degenerate sample (repeated or collinear points) with no regular solution.
     """
-    p1, p2 = _as_points("pts1", pts1), _as_points("pts2", pts2)
+    p1, p2 = as_points("pts1", pts1), as_points("pts2", pts2)
     if p1.shape != (7, 2) or p2.shape != (7, 2):
         raise InputError(f"the 7-point solver needs exactly 7 correspondences, got {len(p1)} and {len(p2)}")
     T1, T2 = hartley_normalization(p1), hartley_normalization(p2)

@@ -7,7 +7,13 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-_FLANN_KDTREE = 1
+#: FLANN's randomised KD-tree index
+FLANN_KDTREE = 1
+
+
+def flann_matcher() -> cv2.FlannBasedMatcher:
+    """The FLANN matcher for float descriptors: 4 randomised KD-trees, 64 checks per query."""
+    return cv2.FlannBasedMatcher({"algorithm": FLANN_KDTREE, "trees": 4}, {"checks": 64})
 
 
 def _knn(query: np.ndarray, train: np.ndarray, binary: bool, k: int) -> list:
@@ -15,7 +21,7 @@ def _knn(query: np.ndarray, train: np.ndarray, binary: bool, k: int) -> list:
         return cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(query, train, k=k)
     if len(train) < 32:
         return cv2.BFMatcher(cv2.NORM_L2).knnMatch(query, train, k=k)
-    flann = cv2.FlannBasedMatcher({"algorithm": _FLANN_KDTREE, "trees": 4}, {"checks": 64})
+    flann = flann_matcher()
     return flann.knnMatch(np.ascontiguousarray(query, np.float32), np.ascontiguousarray(train, np.float32), k=k)
 
 
@@ -42,7 +48,7 @@ class MatchIndex:
         self._flann = None
         if not self.binary and len(desc) >= 32:
             self.desc = np.ascontiguousarray(desc, np.float32)
-            self._flann = cv2.FlannBasedMatcher({"algorithm": _FLANN_KDTREE, "trees": 4}, {"checks": 64})
+            self._flann = flann_matcher()
             self._flann.add([self.desc])
             self._flann.train()
 

@@ -1,107 +1,248 @@
-"""``params.yaml`` sections as frozen dataclasses.
+"""``params.yaml`` sections as frozen pydantic models.
 
-Each stage's parameters are one frozen dataclass whose field names are exactly the keys of its ``params.yaml``
-section and whose defaults are the single place where defaults are declared (the CLI reuses them; a test checks
-that ``params.yaml`` agrees). Unknown or mistyped keys are rejected with a message naming the key.
+Each stage's parameters are one model (a :class:`Section`) whose field names are exactly the keys of its
+``params.yaml`` section. Every default, range and choice is declared once, on its field: ``Field(ge=..., le=...)``
+for a range, ``Literal[...]`` for a choice, and :class:`Bound` for a limit set by another field of the same section
+(``canny_high`` >= ``canny_low``). The CLI reuses the defaults; a test checks that ``params.yaml`` agrees, and the
+message tests are generated from these declarations. Unknown, mistyped or out-of-range keys are refused with an
+:class:`~cvpipe.errors.InputError` of one line that names the dotted key and what it accepts (```hough.lines.rho`
+must be in (0.0, 100.0], got -1``); the same check runs when Python code builds a model directly, and the message
+then names the bare field. Types are strict: ``true`` and ``"3"`` are not numbers, ``3.0`` is not an integer, but
+``3`` is accepted for a float field (and stored as ``3.0``).
+
+A new section is a :class:`Section` subclass, one ``SECTIONS`` entry and the same keys in ``params.yaml``::
+
+    class HoughEdgesParams(Section):
+        canny_low: float = Field(50.0, ge=0.0)
+        canny_high: Annotated[float, Bound(">=", "canny_low")] = 150.0
+        aperture: Literal[3, 5, 7] = 3
+        l2_gradient: bool = False
+
+    SECTIONS.update({"hough.edges": HoughEdgesParams})
+
+Copies with changes go through :func:`replace` (validated; ``model_copy(update=...)`` would skip the checks), dicts
+through ``model_dump()``.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import operator
 import os
-import types
 import typing
-from dataclasses import dataclass
+import warnings
 from pathlib import Path
-from typing import Any, Literal, TypeVar
+from typing import Annotated, Any, Literal, TypeVar
 
+import annotated_types
 import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic_core import PydanticCustomError
 
 from .errors import InputError
 
 T = TypeVar("T")
 
+#: the feature detectors of :data:`cvpipe.features.DETECTORS` (a test keeps the two equal)
+Detector = Literal["sift", "orb", "brisk", "akaze"]
 
-def _check_type(value: Any, tp: Any, key: str) -> Any:
-    """Return ``value`` converted to ``tp`` when that is lossless, else raise naming ``key``."""
-    origin = typing.get_origin(tp)
-    if origin in (typing.Union, types.UnionType):
-        args = typing.get_args(tp)
-        if value is None and type(None) in args:
-            return None
-        errors = []
-        for arg in args:
-            if arg is type(None):
-                continue
-            try:
-                return _check_type(value, arg, key)
-            except InputError as exc:
-                errors.append(str(exc))
-        raise InputError(errors[0] if errors else f"`{key}` has the wrong type")
-    if origin is typing.Literal:
-        choices = typing.get_args(tp)
-        if value not in choices:
-            raise InputError(f"`{key}` must be one of {list(choices)}, got {value!r}")
+_OPS = {">=": operator.ge, ">": operator.gt, "<=": operator.le}
+
+
+@dataclasses.dataclass(frozen=True)
+class Bound:
+    """A limit given by another field of the same section: ``p2: Annotated[int, Bound(">", "p1")]``.
+
+    ``op`` is ``">="``, ``">"`` (a lower limit) or ``"<="`` (an upper limit); the field's own ``Field`` limits still
+    apply, and the message shows both.
+    """
+
+    op: Literal[">=", ">", "<="]
+    other: str
+
+
+class Section(BaseModel):
+    """Base of every ``params.yaml`` section: frozen, unknown keys refused, strict types, :class:`Bound` checked."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
+
+    def __init__(self, /, **data: Any) -> None:
+        try:
+            super().__init__(**data)
+        except ValidationError as exc:
+            raise InputError(_message(type(self), exc, "", data)) from exc
+
+    # pydantic calls an overridden __init__ from model_validate too (whose errors from_mapping words with the
+    # section's name); this mark, the one BaseModel.__init__ carries, keeps validation on pydantic's own path
+    __init__.__pydantic_base_init__ = True  # type: ignore[attr-defined]
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _exact_choice(cls, value: Any, info: Any) -> Any:
+        """A choice matches by type too: pydantic's ``Literal[3, 5, 7]`` takes ``3.0`` even in strict mode."""
+        choices = _choices(cls.model_fields[info.field_name].annotation)
+        if choices and value is not None and not any(type(value) is type(c) and value == c for c in choices):
+            raise PydanticCustomError("literal_error", "not one of the choices", {"expected": str(choices)})
         return value
-    if origin in (tuple, list):
-        if not isinstance(value, (list, tuple)):
-            raise InputError(f"`{key}` must be a list, got {value!r}")
-        args = typing.get_args(tp)
-        if origin is tuple and args and args[-1] is not Ellipsis:
-            if len(value) != len(args):
-                raise InputError(f"`{key}` must be a list of {len(args)} values, got {value!r}")
-            return tuple(_check_type(v, a, f"{key}[{i}]") for i, (v, a) in enumerate(zip(value, args)))
-        inner = args[0] if args else Any
-        return tuple(_check_type(v, inner, f"{key}[{i}]") for i, v in enumerate(value))
-    if tp is Any:
-        return value
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise InputError(f"`{key}` must be true or false, got {value!r}")
-        return value
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise InputError(f"`{key}` must be an integer, got {value!r}")
-        return value
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise InputError(f"`{key}` must be a number, got {value!r}")
-        return float(value)
-    if tp is str:
-        if not isinstance(value, str):
-            raise InputError(f"`{key}` must be a string, got {value!r}")
-        return value
-    return value
+
+    @model_validator(mode="after")
+    def _check_bounds(self):
+        for name, info in type(self).model_fields.items():
+            for b in info.metadata:
+                if isinstance(b, Bound):
+                    value, limit = getattr(self, name), getattr(self, b.other)
+                    if not _OPS[b.op](value, limit):
+                        raise PydanticCustomError("bound", "`{field}` must be {op} `{other}` ({limit}), got {value}",
+                                                  {"field": name, "op": b.op, "other": b.other, "limit": limit,
+                                                   "value": value})
+        return self
+
+    def replace(self: T, **changes: Any) -> T:
+        """A validated copy with ``changes`` (``dataclasses.replace`` for a section).
+
+        Examples
+        --------
+        >>> MatchParams().replace(ratio=0.7).ratio
+        0.7
+        >>> MatchParams().replace(ratio=0.0)
+        Traceback (most recent call last):
+        ...
+        cvpipe.errors.InputError: `ratio` must be in (0.0, 1.0], got 0.0
+        """
+        return type(self)(**{**dict(self), **changes})
+
+
+def replace(obj: T, /, **changes: Any) -> T:
+    """``dataclasses.replace`` that also takes a :class:`Section` (validated, unlike ``model_copy(update=...)``)."""
+    if isinstance(obj, Section):
+        return obj.replace(**changes)
+    return dataclasses.replace(obj, **changes)
+
+
+def _range(info: Any, bound: Bound | None = None, limit: Any = None) -> str:
+    """``"[0, 1.0]"``, ``"(0.0, inf]"``... from a field's ``Field`` limits, ``bound`` (set to ``limit``) replacing the
+    side it sets."""
+    lo, hi = "[-inf", "inf]"
+    for m in info.metadata:
+        if isinstance(m, annotated_types.Gt):
+            lo = f"({m.gt!r}"
+        elif isinstance(m, annotated_types.Ge):
+            lo = f"[{m.ge!r}"
+        elif isinstance(m, annotated_types.Lt):
+            hi = f"{m.lt!r})"
+        elif isinstance(m, annotated_types.Le):
+            hi = f"{m.le!r}]"
+    if bound is not None and bound.op == "<=":
+        hi = f"{limit!r}]"
+    elif bound is not None:
+        lo = f"{'[' if bound.op == '>=' else '('}{limit!r}"
+    return f"{lo}, {hi}"
+
+
+def _choices(tp: Any) -> list | None:
+    """The values of a ``Literal`` annotation (inside ``Optional``), else None."""
+    if typing.get_origin(tp) is Literal:
+        return list(typing.get_args(tp))
+    for arg in typing.get_args(tp):
+        if (found := _choices(arg)) is not None:
+            return found
+    return None
+
+
+_TYPE_WORDS = {
+    "int_type": "an integer", "int_from_float": "an integer", "float_type": "a number", "bool_type": "true or false",
+    "string_type": "a string", "tuple_type": "a list", "list_type": "a list",
+}
+
+
+def _message(cls: type[BaseModel], exc: ValidationError, section: str, data: Any) -> str:
+    """One line for the first error of ``exc``, naming the dotted key (``section.field``) and what it accepts.
+
+    ``data`` is what was validated: a limit set by another field (:class:`Bound`) is read from it."""
+    err = exc.errors(include_url=False)[0]
+    kind, value, ctx = err["type"], err.get("input"), err.get("ctx") or {}
+    key, model, owner, info, tuple_key, node, parent = section, cls, cls, None, section, data, None
+    if kind == "bound":
+        loc = (*err["loc"], ctx["field"])
+    else:
+        loc = err["loc"]
+    for part in loc:
+        if isinstance(part, int):
+            key += f"[{part}]"
+        elif isinstance(model, type) and issubclass(model, BaseModel) and part in model.model_fields:
+            info = model.model_fields[part]
+            key = tuple_key = f"{key}.{part}" if key else part
+            owner, parent, model = model, node, info.annotation
+            node = dict(node).get(part) if isinstance(node, (dict, BaseModel)) else None
+        elif kind == "extra_forbidden" and part == loc[-1]:  # the unknown key itself
+            key = f"{key}.{part}" if key else part
+    if kind == "extra_forbidden":
+        return f"unknown key `{key}` in params; expected one of: {', '.join(sorted(model.model_fields))}"
+    if kind in ("bound", "greater_than", "greater_than_equal", "less_than", "less_than_equal"):
+        bound = next((b for b in info.metadata if isinstance(b, Bound)), None)
+        if bound is None:
+            return f"`{key}` must be in {_range(info)}, got {value!r}"
+        prefix = tuple_key.rpartition(".")[0]
+        given = dict(parent) if isinstance(parent, (dict, BaseModel)) else {}
+        limit = ctx["limit"] if kind == "bound" else given.get(bound.other, owner.model_fields[bound.other].default)
+        value = ctx["value"] if kind == "bound" else value
+        side = "upper" if bound.op == "<=" else "lower"
+        return (f"`{tuple_key}` must be in {_range(info, bound, limit)}, got {value!r} (the {side} limit is "
+                f"`{prefix + '.' if prefix else ''}{bound.other}`)")
+    if kind == "literal_error":
+        return f"`{key}` must be one of {_choices(info.annotation)}, got {value!r}"
+    if kind in ("missing", "too_short", "too_long") and info is not None:
+        n = len(typing.get_args(info.annotation))
+        return f"`{tuple_key}` must be a list of {n} values, got {list(value) if isinstance(value, tuple) else value!r}"
+    if kind in _TYPE_WORDS:
+        return f"`{key}` must be {_TYPE_WORDS[kind]}, got {value!r}"
+    if kind == "model_type" and info is not None:
+        return f"`{key}` must be a {ctx.get('class_name', 'section')}, got {type(value).__name__}"
+    return f"`{key}`: {err['msg']}, got {value!r}"
 
 
 def from_mapping(cls: type[T], mapping: Any, section: str) -> T:
-    """Build the dataclass ``cls`` from a mapping, rejecting unknown keys and wrong types.
+    """Build the section model ``cls`` from a mapping, refusing unknown keys, wrong types and values out of range.
 
     Parameters
     ----------
-    cls : dataclass type
-        The frozen dataclass of the section.
+    cls : Section subclass
+        The model of the section.
     mapping : dict or None
-        The section's keys; missing keys take the dataclass defaults.
+        The section's keys; missing keys take the model defaults. YAML lists become tuples for tuple fields.
     section : str
         The dotted section name, used in messages (``"logo.match"``).
+
+    Returns
+    -------
+    Section
+        The validated, frozen parameters.
+
+    Raises
+    ------
+    InputError
+        One line naming the dotted key (``logo.match.ratio``) and its range or choices.
+
+    Examples
+    --------
+    >>> from_mapping(MatchParams, {"ratio": 0.7}, "homography.match").ratio
+    0.7
+    >>> from_mapping(StereoSgmParams, {"paths": 6}, "stereo.sgm")
+    Traceback (most recent call last):
+    ...
+    cvpipe.errors.InputError: `stereo.sgm.paths` must be one of [4, 8], got 6
     """
     if mapping is None:
         mapping = {}
     if not isinstance(mapping, dict):
         raise InputError(f"params section `{section}` must be a mapping, got {type(mapping).__name__}")
-    fields = {f.name: f for f in dataclasses.fields(cls)}
-    unknown = sorted(set(mapping) - set(fields))
-    if unknown:
-        raise InputError(
-            f"unknown key `{section}.{unknown[0]}` in params; expected one of: {', '.join(sorted(fields))}"
-        )
-    hints = typing.get_type_hints(cls)
-    values = {k: _check_type(v, hints[k], f"{section}.{k}") for k, v in mapping.items()}
+    fields = cls.model_fields
+    data = {k: tuple(v) if isinstance(v, list) and k in fields and typing.get_origin(fields[k].annotation) is tuple
+            else v for k, v in mapping.items()}
     try:
-        return cls(**values)
-    except ValueError as exc:
-        raise InputError(f"params section `{section}`: {exc}") from exc
+        return cls.model_validate(data)
+    except ValidationError as exc:
+        raise InputError(_message(cls, exc, section, data)) from exc
 
 
 def read_params_file(path: str | os.PathLike = "params.yaml") -> dict:
@@ -130,55 +271,33 @@ def load_section(cls: type[T], section: str, path: str | os.PathLike = "params.y
     return from_mapping(cls, node, section)
 
 
-def _in_range(name: str, value: float, lo: float | None = None, hi: float | None = None, *, lo_open=False) -> None:
-    """Raise ``ValueError`` naming ``name`` when ``value`` lies outside [lo, hi] ((lo, hi] with ``lo_open``)."""
-    bad = (lo is not None and (value <= lo if lo_open else value < lo)) or (hi is not None and value > hi)
-    if bad:
-        left = "(" if lo_open else "["
-        raise ValueError(f"`{name}` must be in {left}{lo if lo is not None else '-inf'}, "
-                         f"{hi if hi is not None else 'inf'}], got {value}")
-
-
 # --------------------------------------------------------------------------------------------- shared sections
 
 
-@dataclass(frozen=True)
-class SamplesParams:
+class SamplesParams(Section):
     """``samples``: the bundled sample data set."""
 
     seed: int = 20261122
-    logo_scenes: int = 40
-    logo_negatives: int = 12
-
-    def __post_init__(self):
-        _in_range("logo_scenes", self.logo_scenes, 1, 1000)
-        _in_range("logo_negatives", self.logo_negatives, 0, 1000)
+    logo_scenes: int = Field(40, ge=1, le=1000)
+    logo_negatives: int = Field(12, ge=0, le=1000)
 
 
-@dataclass(frozen=True)
-class FeaturesParams:
+class FeaturesParams(Section):
     """Keypoint detection (``<task>.features``)."""
 
-    detector: str = "sift"
-    max_features: int = 4000
-
-    def __post_init__(self):
-        _in_range("max_features", self.max_features, 1, 1_000_000)
+    detector: Detector = "sift"
+    max_features: int = Field(4000, ge=1, le=1_000_000)
 
 
-@dataclass(frozen=True)
-class MatchParams:
+class MatchParams(Section):
     """Descriptor matching (``<task>.match``)."""
 
-    ratio: float = 0.8
+    ratio: float = Field(0.8, gt=0.0, le=1.0)
     cross_check: bool = False
 
-    def __post_init__(self):
-        _in_range("ratio", self.ratio, 0.0, 1.0, lo_open=True)
 
-
-#: dotted params.yaml section -> dataclass; the defaults test walks this table
-SECTIONS: dict[str, type] = {
+#: dotted params.yaml section -> model; the defaults test walks this table
+SECTIONS: dict[str, type[Section]] = {
     "samples": SamplesParams,
     "homography.features": FeaturesParams,
     "homography.match": MatchParams,
@@ -188,33 +307,20 @@ SECTIONS: dict[str, type] = {
 # ---- homography ----
 
 
-@dataclass(frozen=True)
-class HomographyEstimateParams:
+class HomographyEstimateParams(Section):
     """``homography.estimate``: robust homography from the matches (the same settings for every method)."""
 
-    threshold: float = 3.0
-    confidence: float = 0.999
-    max_iters: int = 10_000
+    threshold: float = Field(3.0, gt=0.0)
+    confidence: float = Field(0.999, gt=0.0, lt=1.0)
+    max_iters: int = Field(10_000, ge=1, le=10_000_000)
     seed: int = 0
 
-    def __post_init__(self):
-        _in_range("threshold", self.threshold, 0.0, None, lo_open=True)
-        _in_range("confidence", self.confidence, 0.0, 1.0, lo_open=True)
-        if self.confidence >= 1.0:
-            raise ValueError(f"`confidence` must be in (0, 1), got {self.confidence}")
-        _in_range("max_iters", self.max_iters, 1, 10_000_000)
 
-
-@dataclass(frozen=True)
-class HomographyReportParams:
+class HomographyReportParams(Section):
     """``homography.report``: success criterion and the alignment pictures."""
 
-    success_px: float = 3.0
-    checker_tiles: int = 8
-
-    def __post_init__(self):
-        _in_range("success_px", self.success_px, 0.0, None, lo_open=True)
-        _in_range("checker_tiles", self.checker_tiles, 1, 256)
+    success_px: float = Field(3.0, gt=0.0)
+    checker_tiles: int = Field(8, ge=1, le=256)
 
 
 SECTIONS.update({
@@ -226,51 +332,31 @@ SECTIONS.update({
 # ---- hough ----
 
 
-@dataclass(frozen=True)
-class HoughEdgesParams:
+class HoughEdgesParams(Section):
     """``hough.edges``: Canny edge map fed to both Hough implementations."""
 
-    canny_low: float = 50.0
-    canny_high: float = 150.0
-    aperture: int = 3
+    canny_low: float = Field(50.0, ge=0.0)
+    canny_high: Annotated[float, Bound(">=", "canny_low")] = 150.0
+    aperture: Literal[3, 5, 7] = 3
     l2_gradient: bool = False
-    blur_sigma: float = 0.0
-
-    def __post_init__(self):
-        _in_range("canny_low", self.canny_low, 0.0)
-        _in_range("canny_high", self.canny_high, self.canny_low)
-        if self.aperture not in (3, 5, 7):
-            raise ValueError(f"`aperture` must be one of [3, 5, 7], got {self.aperture}")
-        _in_range("blur_sigma", self.blur_sigma, 0.0, 20.0)
+    blur_sigma: float = Field(0.0, ge=0.0, le=20.0)
 
 
-@dataclass(frozen=True)
-class HoughLinesParams:
+class HoughLinesParams(Section):
     """``hough.lines``: standard Hough transform, identical for ``ours`` and ``opencv``."""
 
-    rho: float = 1.0
-    theta_deg: float = 1.0
-    threshold: int = 150
+    rho: float = Field(1.0, gt=0.0, le=100.0)
+    theta_deg: float = Field(1.0, gt=0.0, le=180.0)
+    threshold: int = Field(150, ge=1)
     refine: bool = False
-    repeats: int = 5
-
-    def __post_init__(self):
-        _in_range("rho", self.rho, 0.0, 100.0, lo_open=True)
-        _in_range("theta_deg", self.theta_deg, 0.0, 180.0, lo_open=True)
-        _in_range("threshold", self.threshold, 1)
-        _in_range("repeats", self.repeats, 1, 100)
+    repeats: int = Field(5, ge=1, le=100)
 
 
-@dataclass(frozen=True)
-class HoughReportParams:
+class HoughReportParams(Section):
     """``hough.report``: when a detected line counts as a sample's true line."""
 
-    rho_tol: float = 3.0
-    theta_tol_deg: float = 1.5
-
-    def __post_init__(self):
-        _in_range("rho_tol", self.rho_tol, 0.0, lo_open=True)
-        _in_range("theta_tol_deg", self.theta_tol_deg, 0.0, 90.0, lo_open=True)
+    rho_tol: float = Field(3.0, gt=0.0)
+    theta_tol_deg: float = Field(1.5, gt=0.0, le=90.0)
 
 
 SECTIONS.update({
@@ -283,88 +369,53 @@ SECTIONS.update({
 # ---- defect ----
 
 
-@dataclass(frozen=True)
 class DefectFeaturesParams(FeaturesParams):
     """``defect.features``: ORB is 10x faster than SIFT here and ECC does the fine alignment anyway."""
 
-    detector: str = "orb"
-    max_features: int = 1000
+    detector: Detector = "orb"
+    max_features: int = Field(1000, ge=1, le=1_000_000)
 
 
-@dataclass(frozen=True)
-class DefectRegisterParams:
+class DefectRegisterParams(Section):
     """``defect.register``: probe -> reference registration (RANSAC on matches, then ECC refinement)."""
 
-    ransac_threshold: float = 3.0
-    min_inliers: int = 15
-    min_inlier_ratio: float = 0.1
-    max_scale_change: float = 2.0
-    min_overlap: float = 0.4
-    ecc_levels: int = 2
-    ecc_scale: float = 0.5
-    ecc_iterations: int = 25
-    ecc_eps: float = 1e-4
-    min_correlation: float = 0.5
+    ransac_threshold: float = Field(3.0, gt=0.0, le=100.0)
+    min_inliers: int = Field(15, ge=4, le=1_000_000)
+    min_inlier_ratio: float = Field(0.1, ge=0.0, le=1.0)
+    max_scale_change: float = Field(2.0, ge=1.0, le=100.0)
+    min_overlap: float = Field(0.4, gt=0.0, le=1.0)
+    ecc_levels: int = Field(2, ge=0, le=6)
+    ecc_scale: float = Field(0.5, gt=0.0, le=1.0)
+    ecc_iterations: int = Field(25, ge=1, le=10_000)
+    ecc_eps: float = Field(1e-4, gt=0.0, le=1.0)
+    min_correlation: float = Field(0.5, ge=-1.0, le=1.0)
     direct_fallback: bool = True
-    direct_min_correlation: float = 0.8
-    retry_correlation: float = 0.95
+    direct_min_correlation: float = Field(0.8, ge=-1.0, le=1.0)
+    retry_correlation: float = Field(0.95, ge=-1.0, le=1.0)
     seed: int = 0
 
-    def __post_init__(self):
-        _in_range("ransac_threshold", self.ransac_threshold, 0.0, 100.0, lo_open=True)
-        _in_range("min_inliers", self.min_inliers, 4, 1_000_000)
-        _in_range("min_inlier_ratio", self.min_inlier_ratio, 0.0, 1.0)
-        _in_range("max_scale_change", self.max_scale_change, 1.0, 100.0)
-        _in_range("min_overlap", self.min_overlap, 0.0, 1.0, lo_open=True)
-        _in_range("ecc_levels", self.ecc_levels, 0, 6)
-        _in_range("ecc_scale", self.ecc_scale, 0.0, 1.0, lo_open=True)
-        _in_range("ecc_iterations", self.ecc_iterations, 1, 10_000)
-        _in_range("ecc_eps", self.ecc_eps, 0.0, 1.0, lo_open=True)
-        _in_range("min_correlation", self.min_correlation, -1.0, 1.0)
-        _in_range("direct_min_correlation", self.direct_min_correlation, -1.0, 1.0)
-        _in_range("retry_correlation", self.retry_correlation, -1.0, 1.0)
 
-
-@dataclass(frozen=True)
-class DefectDiffParams:
+class DefectDiffParams(Section):
     """``defect.diff``: photometric fit and the misregistration-tolerant difference."""
 
-    smooth_sigma: float = 1.0
-    tolerance_radius: int = 3
-    border_margin: int = 6
-    fit_trim: float = 3.0
-
-    def __post_init__(self):
-        _in_range("smooth_sigma", self.smooth_sigma, 0.0, 20.0)
-        _in_range("tolerance_radius", self.tolerance_radius, 0, 20)
-        _in_range("border_margin", self.border_margin, 0, 1000)
-        _in_range("fit_trim", self.fit_trim, 0.0, 100.0, lo_open=True)
+    smooth_sigma: float = Field(1.0, ge=0.0, le=20.0)
+    tolerance_radius: int = Field(3, ge=0, le=20)
+    border_margin: int = Field(6, ge=0, le=1000)
+    fit_trim: float = Field(3.0, gt=0.0, le=100.0)
 
 
-@dataclass(frozen=True)
-class DefectRegionParams:
+class DefectRegionParams(Section):
     """``defect.regions``: threshold, morphology, connected components, verdict."""
 
-    threshold: float = 0.15
-    seed_threshold: float = 0.3
-    seed_radius: int = 1
-    noise_factor: float = 6.0
-    open_radius: int = 1
-    close_radius: int = 5
-    min_area: int = 12
-    merge_distance: float = 8.0
-    pad: float = 0.0
-
-    def __post_init__(self):
-        _in_range("threshold", self.threshold, 0.0, 1.0, lo_open=True)
-        _in_range("seed_threshold", self.seed_threshold, self.threshold, 1.0)
-        _in_range("seed_radius", self.seed_radius, 0, 50)
-        _in_range("noise_factor", self.noise_factor, 0.0, 100.0)
-        _in_range("open_radius", self.open_radius, 0, 50)
-        _in_range("close_radius", self.close_radius, 0, 50)
-        _in_range("min_area", self.min_area, 1, 1_000_000)
-        _in_range("merge_distance", self.merge_distance, -1.0, 1000.0)
-        _in_range("pad", self.pad, 0.0, 1000.0)
+    threshold: float = Field(0.15, gt=0.0, le=1.0)
+    seed_threshold: Annotated[float, Bound(">=", "threshold")] = Field(0.3, le=1.0)
+    seed_radius: int = Field(1, ge=0, le=50)
+    noise_factor: float = Field(6.0, ge=0.0, le=100.0)
+    open_radius: int = Field(1, ge=0, le=50)
+    close_radius: int = Field(5, ge=0, le=50)
+    min_area: int = Field(12, ge=1, le=1_000_000)
+    merge_distance: float = Field(8.0, ge=-1.0, le=1000.0)
+    pad: float = Field(0.0, ge=0.0, le=1000.0)
 
 
 SECTIONS.update({
@@ -376,111 +427,76 @@ SECTIONS.update({
 })
 
 
-@dataclass(frozen=True)
-class InspectParams:
+# `register` is also ABCMeta.register, which pydantic warns about; the field wins on instances, as it should
+warnings.filterwarnings("ignore", message='Field name "register" in "InspectParams" shadows', category=UserWarning)
+
+
+class InspectParams(Section):
     """Every parameter of ``cvpipe.defect.inspect``: the ``defect.<field>`` sections above, one per stage."""
 
-    features: DefectFeaturesParams = dataclasses.field(default_factory=DefectFeaturesParams)
-    match: MatchParams = dataclasses.field(default_factory=MatchParams)
-    register: DefectRegisterParams = dataclasses.field(default_factory=DefectRegisterParams)
-    diff: DefectDiffParams = dataclasses.field(default_factory=DefectDiffParams)
-    regions: DefectRegionParams = dataclasses.field(default_factory=DefectRegionParams)
+    features: DefectFeaturesParams = Field(default_factory=DefectFeaturesParams)
+    match: MatchParams = Field(default_factory=MatchParams)
+    register: DefectRegisterParams = Field(default_factory=DefectRegisterParams)
+    diff: DefectDiffParams = Field(default_factory=DefectDiffParams)
+    regions: DefectRegionParams = Field(default_factory=DefectRegionParams)
 
 
 def load_inspect_params(path: str | os.PathLike = "params.yaml") -> InspectParams:
     """The ``defect.*`` sections of ``params.yaml`` as one :class:`InspectParams`."""
-    return InspectParams(**{f.name: load_section(SECTIONS[f"defect.{f.name}"], f"defect.{f.name}", path)
-                            for f in dataclasses.fields(InspectParams)})
+    return InspectParams(**{name: load_section(SECTIONS[f"defect.{name}"], f"defect.{name}", path)
+                            for name in InspectParams.model_fields})
 
 
 # ---------------------------------------------------------------------------------------------------- panorama
 
 
-@dataclass(frozen=True)
-class PanoramaFeaturesParams:
+class PanoramaFeaturesParams(Section):
     """``panorama.features``: features at the registration resolution (``work_megapix`` million pixels, <= 0 means
     full resolution; ``cv2.Stitcher`` uses 0.6)."""
 
-    detector: str = "sift"
-    max_features: int = 1500
-    work_megapix: float = 0.6
-
-    def __post_init__(self):
-        _in_range("max_features", self.max_features, 1, 1_000_000)
-        _in_range("work_megapix", self.work_megapix, None, 1000)
+    detector: Detector = "sift"
+    max_features: int = Field(1500, ge=1, le=1_000_000)
+    work_megapix: float = Field(0.6, le=1000.0)
 
 
-@dataclass(frozen=True)
-class PanoramaMatchParams:
+class PanoramaMatchParams(Section):
     """``panorama.match``: pairwise matching and the acceptance of a pair as an edge of the match graph; only each
     image's ``candidates`` most promising partners are matched in full (0: every pair). An accepted pair's
     homography is refitted on its inliers with the tighter ``refit_threshold`` (0: no refit)."""
 
-    ratio: float = 0.8
-    ransac_threshold: float = 3.0
-    min_inliers: int = 10
-    min_confidence: float = 1.0
-    candidates: int = 5
-    refit_threshold: float = 2.0
+    ratio: float = Field(0.8, gt=0.0, le=1.0)
+    ransac_threshold: float = Field(3.0, gt=0.0)
+    min_inliers: int = Field(10, ge=4)
+    min_confidence: float = Field(1.0, ge=0.0)
+    candidates: int = Field(5, ge=0)
+    refit_threshold: Annotated[float, Bound("<=", "ransac_threshold")] = Field(2.0, ge=0.0)
     seed: int = 0
 
-    def __post_init__(self):
-        _in_range("candidates", self.candidates, 0, None)
-        _in_range("ratio", self.ratio, 0.0, 1.0, lo_open=True)
-        _in_range("ransac_threshold", self.ransac_threshold, 0.0, None, lo_open=True)
-        _in_range("min_inliers", self.min_inliers, 4, None)
-        _in_range("min_confidence", self.min_confidence, 0.0, None)
-        _in_range("refit_threshold", self.refit_threshold, 0.0, self.ransac_threshold)
 
-
-@dataclass(frozen=True)
-class PanoramaHomographiesParams:
+class PanoramaHomographiesParams(Section):
     """``panorama.homographies``: chaining along the maximum spanning tree, then joint least-squares refinement
     (``refine``: auto, homography, rotation or none)."""
 
-    refine: str = "homography"
-    max_points_per_pair: int = 100
-
-    def __post_init__(self):
-        if self.refine not in ("auto", "homography", "rotation", "none"):
-            raise ValueError(f"`refine` must be one of ['auto', 'homography', 'rotation', 'none'], got {self.refine!r}")
-        _in_range("max_points_per_pair", self.max_points_per_pair, 4, None)
+    refine: Literal["auto", "homography", "rotation", "none"] = "homography"
+    max_points_per_pair: int = Field(100, ge=4)
 
 
-@dataclass(frozen=True)
-class PanoramaWarpParams:
+class PanoramaWarpParams(Section):
     """``panorama.warp``: projection and compose resolution (``compose_megapix`` <= 0 means full resolution)."""
 
-    projection: str = "plane"
-    compose_megapix: float = -1.0
-    max_canvas_megapix: float = 200.0
-
-    def __post_init__(self):
-        if self.projection not in ("plane", "cylindrical", "spherical"):
-            raise ValueError(f"`projection` must be one of ['plane', 'cylindrical', 'spherical'], "
-                             f"got {self.projection!r}")
-        _in_range("compose_megapix", self.compose_megapix, None, 1000)
-        _in_range("max_canvas_megapix", self.max_canvas_megapix, 0.0, None, lo_open=True)
+    projection: Literal["plane", "cylindrical", "spherical"] = "plane"
+    compose_megapix: float = Field(-1.0, le=1000.0)
+    max_canvas_megapix: float = Field(200.0, gt=0.0)
 
 
-@dataclass(frozen=True)
-class PanoramaBlendParams:
+class PanoramaBlendParams(Section):
     """``panorama.blend``: exposure compensation (``gain_compensation``: OpenCV's compensator kinds, blocks of
     ``gain_block`` pixels) and the blender (multi-band with ``bands`` levels, or feather)."""
 
-    blender: str = "multiband"
-    bands: int = 5
+    blender: Literal["multiband", "feather"] = "multiband"
+    bands: int = Field(5, ge=1, le=12)
     gain_compensation: Literal["none", "gain", "channels", "blocks", "channel_blocks"] = "gain"
-    gain_block: int = 32
-
-    def __post_init__(self):
-        if self.blender not in ("multiband", "feather"):
-            raise ValueError(f"`blender` must be one of ['feather', 'multiband'], got {self.blender!r}")
-        _in_range("bands", self.bands, 1, 12)
-        gains = ["none", "gain", "channels", "blocks", "channel_blocks"]
-        if self.gain_compensation not in gains:
-            raise ValueError(f"`gain_compensation` must be one of {gains}, got {self.gain_compensation!r}")
-        _in_range("gain_block", self.gain_block, 4, 1024)
+    gain_block: int = Field(32, ge=4, le=1024)
 
 
 SECTIONS.update({
@@ -495,87 +511,51 @@ SECTIONS.update({
 # ---- logo ----
 
 
-@dataclass(frozen=True)
 class LogoFeaturesParams(FeaturesParams):
     """``logo.features``: keypoints of gallery and scene photos. ``scene_min_long_side`` enlarges smaller scene
     photos before detection (:func:`cvpipe.features.detect`), so that logos a few dozen pixels wide still get
     keypoints. Gallery images keep their size: an isolated logo crop enlarged several times would leave the scale
     range of the binary detectors' pyramids."""
 
-    scene_min_long_side: int = 800
-
-    def __post_init__(self):
-        super().__post_init__()
-        _in_range("scene_min_long_side", self.scene_min_long_side, 0, 10_000)
+    scene_min_long_side: int = Field(800, ge=0, le=10_000)
 
 
-@dataclass(frozen=True)
-class LogoMatchParams:
-    """``logo.match``: scene -> gallery matching (see :func:`cvpipe.logos.match_scene`)."""
+class LogoMatchParams(Section):
+    """``logo.match``: scene -> gallery matching (see :func:`cvpipe.logo.match_scene`)."""
 
-    ratio: float = 0.95
-    k: int = 8
-    per_reference: int = 1
-    min_features: int = 8
-    reference_features: int = 1000
-    register_references: bool = False
-    reverse_shortlist: int = 0
-    reverse_ratio: float = 0.8
-
-    def __post_init__(self):
-        _in_range("ratio", self.ratio, 0.0, 1.0, lo_open=True)
-        _in_range("reverse_shortlist", self.reverse_shortlist, 0, 100_000)
-        _in_range("reverse_ratio", self.reverse_ratio, 0.0, 1.0, lo_open=True)
-        _in_range("k", self.k, 2, 100)
-        _in_range("per_reference", self.per_reference, 1, self.k)
-        _in_range("min_features", self.min_features, 4, 100_000)
-        _in_range("reference_features", self.reference_features, self.min_features, 1_000_000)
-        if not isinstance(self.register_references, bool):
-            raise ValueError(f"`register_references` must be true or false, got {self.register_references!r}")
+    ratio: float = Field(0.95, gt=0.0, le=1.0)
+    k: int = Field(8, ge=2, le=100)
+    per_reference: Annotated[int, Bound("<=", "k")] = Field(1, ge=1)
+    min_features: int = Field(8, ge=4, le=100_000)
+    reference_features: Annotated[int, Bound(">=", "min_features")] = Field(1000, le=1_000_000)
 
 
-@dataclass(frozen=True)
-class LogoVerifyParams:
+#: the geometric fitters of :data:`cvpipe.logos.MODELS`
+LogoModel = Literal["affine_homography", "homography"]
+
+
+class LogoVerifyParams(Section):
     """``logo.verify``: homography verification, plausibility checks and the decision threshold.
 
     ``model`` is the geometric fitter for float descriptors (SIFT), ``binary_model`` for ORB, BRISK and AKAZE (see
-    :data:`cvpipe.logos.MODELS`)."""
+    :data:`cvpipe.logo.MODELS`)."""
 
-    model: str = "affine_homography"
-    binary_model: str = "homography"
-    ransac_threshold: float = 4.0
-    max_iters: int = 2000
-    affine_samples: int = 500
-    max_models: int = 3
-    min_matches: int = 5
-    min_inliers: int = 5
-    min_area: float = 0.001
-    max_area: float = 4.0
-    max_anisotropy: float = 6.0
-    max_perspective: float = 30.0
-    min_spread: float = 0.05
+    model: LogoModel = "affine_homography"
+    binary_model: LogoModel = "homography"
+    ransac_threshold: float = Field(4.0, gt=0.0, le=100.0)
+    max_iters: int = Field(2000, ge=1, le=10_000_000)
+    affine_samples: int = Field(500, ge=1, le=10_000_000)
+    max_models: int = Field(3, ge=1, le=100)
+    min_matches: int = Field(5, ge=4, le=100_000)
+    min_inliers: int = Field(5, ge=4, le=100_000)
+    min_area: float = Field(0.001, gt=0.0, le=1.0)
+    max_area: Annotated[float, Bound(">=", "min_area")] = Field(4.0, le=100.0)
+    max_anisotropy: float = Field(6.0, ge=1.0, le=1000.0)
+    max_perspective: float = Field(30.0, ge=1.0, le=1e6)
+    min_spread: float = Field(0.05, ge=0.0, le=1.0)
     score_threshold: float = 0.0
-    angle_tolerance: float = 30.0
-    scale_tolerance: float = 2.0
-
-    def __post_init__(self):
-        models = ("affine_homography", "homography")
-        for name in ("model", "binary_model"):
-            if getattr(self, name) not in models:
-                raise ValueError(f"`{name}` must be one of {list(models)}, got {getattr(self, name)!r}")
-        _in_range("ransac_threshold", self.ransac_threshold, 0.0, 100.0, lo_open=True)
-        _in_range("max_iters", self.max_iters, 1, 10_000_000)
-        _in_range("affine_samples", self.affine_samples, 1, 10_000_000)
-        _in_range("max_models", self.max_models, 1, 100)
-        _in_range("min_matches", self.min_matches, 4, 100_000)
-        _in_range("min_inliers", self.min_inliers, 4, 100_000)
-        _in_range("min_area", self.min_area, 0.0, 1.0, lo_open=True)
-        _in_range("max_area", self.max_area, self.min_area, 100.0)
-        _in_range("max_anisotropy", self.max_anisotropy, 1.0, 1000.0)
-        _in_range("max_perspective", self.max_perspective, 1.0, 1e6)
-        _in_range("min_spread", self.min_spread, 0.0, 1.0)
-        _in_range("angle_tolerance", self.angle_tolerance, 0.0, 180.0, lo_open=True)
-        _in_range("scale_tolerance", self.scale_tolerance, 1.0, 16.0, lo_open=True)
+    angle_tolerance: float = Field(30.0, gt=0.0, le=180.0)
+    scale_tolerance: float = Field(2.0, gt=1.0, le=16.0)
 
 
 SECTIONS.update({
@@ -591,114 +571,74 @@ SECTIONS.update({
 # cvpipe.stereo (a test checks that).
 
 
-@dataclass(frozen=True)
-class StereoDisparityParams:
+class StereoDisparityParams(Section):
     """``stereo.disparity``: the search range shared by every method (a pair's own truth or calibration wins)."""
 
-    max_disp: int = 64
-
-    def __post_init__(self):
-        _in_range("max_disp", self.max_disp, 1, 4096)
+    max_disp: int = Field(64, ge=1, le=4096)
 
 
-@dataclass(frozen=True)
-class StereoSgmParams:
+class StereoSgmParams(Section):
     """``stereo.sgm``: our semi-global matching (:func:`cvpipe.stereo.disparity_sgm`)."""
 
     census_size: tuple[int, int] = (5, 7)
-    ad_weight: float = 0.5
-    ad_trunc: int = 20
-    paths: int = 8
-    p1: int = 15
-    p2: int = 150
-    p2_tau: float = 16.0
-    uniqueness: float = 0.0
+    ad_weight: float = Field(0.5, ge=0.0)
+    ad_trunc: int = Field(20, ge=1, le=255)
+    paths: Literal[4, 8] = 8  # the kernels aggregate 4 or 8 directions only
+    p1: int = Field(15, ge=1, le=4095)
+    p2: Annotated[int, Bound(">", "p1")] = Field(150, le=4096)
+    p2_tau: float = Field(16.0, ge=0.0)
+    uniqueness: float = Field(0.0, ge=0.0, le=0.99)
     subpixel: bool = True
     lr_max_diff: float = 2.0
-    speckle_size: int = 100
-    speckle_range: float = 2.0
+    speckle_size: int = Field(100, ge=0)
+    speckle_range: float = Field(2.0, ge=0.0)
     fill: bool = False
 
-    def __post_init__(self):
-        if self.paths not in (4, 8) or isinstance(self.paths, bool):  # the kernels aggregate 4 or 8 directions only
-            raise ValueError(f"`paths` must be one of [4, 8], got {self.paths}")
-        _in_range("p1", self.p1, 1, 4095)
-        _in_range("p2", self.p2, self.p1 + 1, 4096)
-        _in_range("ad_weight", self.ad_weight, 0.0)
-        _in_range("ad_trunc", self.ad_trunc, 1, 255)
-        _in_range("p2_tau", self.p2_tau, 0.0)
-        _in_range("uniqueness", self.uniqueness, 0.0, 0.99)
-        _in_range("speckle_size", self.speckle_size, 0)
-        _in_range("speckle_range", self.speckle_range, 0.0)
 
-
-@dataclass(frozen=True)
-class StereoBmParams:
+class StereoBmParams(Section):
     """``stereo.opencv_bm``: OpenCV block matching (:func:`cvpipe.stereo.disparity_opencv_bm`)."""
 
-    block_size: int = 15
+    block_size: int = Field(15, ge=5, le=255)
     uniqueness: int = 15
     speckle_size: int = 100
     speckle_range: int = 2
 
-    def __post_init__(self):
-        _in_range("block_size", self.block_size, 5, 255)
 
-
-@dataclass(frozen=True)
-class StereoSgbmParams:
+class StereoSgbmParams(Section):
     """``stereo.opencv_sgbm``: OpenCV semi-global block matching (:func:`cvpipe.stereo.disparity_opencv_sgbm`)."""
 
     mode: Literal["sgbm", "hh", "sgbm_3way", "hh4"] = "sgbm"
-    block_size: int = 3
+    block_size: int = Field(3, ge=1, le=11)
     uniqueness: int = 10
     speckle_size: int = 100
     speckle_range: int = 2
     lr_max_diff: int = 1
 
-    def __post_init__(self):
-        _in_range("block_size", self.block_size, 1, 11)
 
-
-@dataclass(frozen=True)
-class StereoRectifyParams:
+class StereoRectifyParams(Section):
     """``stereo.rectify``: features, matching and the fundamental-matrix fit of :mod:`cvpipe.rectify`, and when a
     pair counts as already rectified (:func:`cvpipe.rectify.looks_rectified`)."""
 
-    detector: Literal["sift", "orb", "brisk", "akaze"] = "sift"
-    max_features: int = 4000
-    ratio: float = 0.8
-    threshold: float = 1.0
-    margin: float = 1.0
-    seed: int = 0
-    rectified_max_dy: float = 1.0
-    rectified_share: float = 0.75
-
-    def __post_init__(self):
-        _in_range("max_features", self.max_features, 1, 1_000_000)
-        _in_range("ratio", self.ratio, 0.0, 1.0, lo_open=True)
-        _in_range("threshold", self.threshold, 0.0, 100.0, lo_open=True)
-        _in_range("margin", self.margin, 0.0, 1000.0)
-        _in_range("seed", self.seed, 0)
-        _in_range("rectified_max_dy", self.rectified_max_dy, 0.0, 100.0, lo_open=True)
-        _in_range("rectified_share", self.rectified_share, 0.0, 1.0, lo_open=True)
+    detector: Detector = "sift"
+    max_features: int = Field(4000, ge=1, le=1_000_000)
+    ratio: float = Field(0.8, gt=0.0, le=1.0)
+    threshold: float = Field(1.0, gt=0.0, le=100.0)
+    margin: float = Field(1.0, ge=0.0, le=1000.0)
+    seed: int = Field(0, ge=0)
+    rectified_max_dy: float = Field(1.0, gt=0.0, le=100.0)
+    rectified_share: float = Field(0.75, gt=0.0, le=1.0)
 
 
-@dataclass(frozen=True)
-class StereoDepthParams:
+class StereoDepthParams(Section):
     """``stereo.depth``: which method's disparity becomes depth and a point cloud (pairs with a calibration)."""
 
     method: Literal["sgm", "opencv_bm", "opencv_sgbm"] = "sgm"
 
 
-@dataclass(frozen=True)
-class StereoReportParams:
+class StereoReportParams(Section):
     """``stereo.report``: the absolute error (pixels) at which the error maps' colour saturates."""
 
-    error_clip: float = 4.0
-
-    def __post_init__(self):
-        _in_range("error_clip", self.error_clip, 0.0, lo_open=True)
+    error_clip: float = Field(4.0, gt=0.0)
 
 
 SECTIONS.update({
@@ -715,8 +655,7 @@ SECTIONS.update({
 # ---- compute (where per-item work runs; never a parameter of a DVC stage: it does not change any result) ----
 
 
-@dataclass(frozen=True)
-class ComputeParams:
+class ComputeParams(Section):
     """``compute``: where stages run their items (:func:`cvpipe.compute.map_items`).
 
     ``scheduler`` is ``""`` (in process), ``"local"`` (a Dask LocalCluster of ``workers`` single-threaded processes,
@@ -725,15 +664,18 @@ class ComputeParams:
     """
 
     scheduler: str = ""
-    workers: int = 0
-    window: int = 0
+    workers: int = Field(0, ge=0, le=4096)
+    window: int = Field(0, ge=0, le=1_000_000)
 
-    def __post_init__(self):
-        from .compute import check_scheduler
-
-        check_scheduler(self.scheduler, "scheduler")
-        _in_range("workers", self.workers, 0, 4096)
-        _in_range("window", self.window, 0, 1_000_000)
+    @field_validator("scheduler")
+    @classmethod
+    def _address(cls, value: str) -> str:
+        """The accepted forms of :func:`cvpipe.compute.check_scheduler` (not imported: params stays light)."""
+        s = value.strip()
+        if s in ("", "local") or ("://" in s and s.split("://", 1)[1]):
+            return s
+        raise PydanticCustomError("scheduler", "must be '' (in process), 'local' or a scheduler address like "
+                                               "tcp://host:8786")
 
 
 # not listed in any stage's ``params:`` in dvc.yaml: changing it never reruns a stage

@@ -8,7 +8,7 @@ references in index order and the matched scenes) and `dropped.json`.
 
 from pathlib import Path
 
-from cvpipe import datasets, io, logos
+from cvpipe import datasets, io, logo
 from cvpipe.errors import CvpipeError, InputError
 from cvpipe.features import DETECTORS, Features
 from cvpipe.params import LogoMatchParams
@@ -31,7 +31,7 @@ def feature_reasons(features: Path) -> dict[str, str]:
 
 
 def load_gallery(inputs: datasets.LogoInputs, root: Path, features: Path,
-                 params: LogoMatchParams) -> tuple[logos.Gallery, list[dict]]:
+                 params: LogoMatchParams) -> tuple[logo.Gallery, list[dict]]:
     """The gallery indexed from the cached features, every reference file mapped to its brand (the brands in
     sorted order, a brand's files in the order ``find_logo`` lists them); and the references left out, why."""
     reasons, dropped, refs = feature_reasons(features), [], []
@@ -43,8 +43,8 @@ def load_gallery(inputs: datasets.LogoInputs, root: Path, features: Path,
                 dropped.append({"item": name, "reason": got})
                 continue
             w, h = (int(v) for v in got["image_size"])
-            refs.append(logos.Reference(brand, name, Features.from_arrays(got), (w, h)))
-    gallery = logos.build_gallery(refs, params.min_features, params.reference_features, params.register_references)
+            refs.append(logo.Reference(brand, name, Features.from_arrays(got), (w, h)))
+    gallery = logo.build_gallery(refs, params.min_features, params.reference_features)
     dropped += [{"item": n, "reason": f"fewer than {params.min_features} keypoints"} for n in gallery.dropped]
     return gallery, dropped
 
@@ -67,7 +67,7 @@ def logo_match(st: Stage) -> None:
             continue
         try:
             with st.timer("match"):
-                m = logos.match_scene(gallery, Features.from_arrays(got), st.params)
+                m = logo.match_scene(gallery, Features.from_arrays(got), st.params)
         except (CvpipeError, ValueError) as exc:
             st.drop(sc.path.relative_to(root).as_posix(), str(exc))
             continue

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cvpipe import datasets, io, logos
+from cvpipe import datasets, io, logo
 from stages._runner import Stage, run
 
 #: overlays of found logos drawn (plus up to MAX_WRONG wrong answers on scenes with ground truth)
@@ -24,12 +24,12 @@ def logo_report(st: Stage) -> None:
         lab = [r for r in recs if r["labelled"]]
         if not lab:
             continue
-        img = logos.draw_confusion(logos.confusion([r["truth"] for r in lab], [r["brand"] for r in lab], brands),
+        img = logo.draw_confusion(logo.confusion([r["truth"] for r in lab], [r["brand"] for r in lab], brands),
                                    brands, f"{m}: truth (rows) vs decision")
         io.save_image(out / f"confusion_{m}.png", img)
         pictures.append({"path": (out / f"confusion_{m}.png").as_posix(), "caption": f"{m}: confusion matrix on "
                          f"the {len(lab)} scenes with ground truth (rows = truth, columns = decision, last = none)"})
-    best = logos.pick_method(decisions, vp.score_threshold, st.sections["logo.features"].detector)
+    best = logo.pick_method(decisions, vp.score_threshold, st.sections["logo.features"].detector)
     recs = decisions[best]
     shown = [r for r in recs if r["brand"]][:MAX_FOUND]
     shown += [r for r in recs if r["labelled"] and r["best_brand"] and r["truth"] != r["brand"]
@@ -40,7 +40,7 @@ def logo_report(st: Stage) -> None:
         truth = f" (truth {r['truth'] or 'none'})" if r["labelled"] else ""
         caption = (f"{best}: {r['scene']} -> {r['brand'] or 'none'}{truth}, best {r['best_brand']} with "
                    f"{r['inliers']} inliers")
-        pic = logos.draw_detection(io.read_image(scenes[r["scene"]].path, "color"),
+        pic = logo.draw_detection(io.read_image(scenes[r["scene"]].path, "color"),
                                    io.read_image(root / r["reference"], "color"),
                                    None if r["quad"] is None else np.array(r["quad"]), pairs["gallery_xy"],
                                    pairs["scene_xy"], None if r.get("truth_quad") is None else
@@ -50,11 +50,11 @@ def logo_report(st: Stage) -> None:
         blue = "blue = true outline, " if r["labelled"] else ""
         pictures.append({"path": path.as_posix(), "caption": f"{caption}; green = found outline, {blue}orange = "
                          "inlier matches"})
-    dropped = logos.merge_dropped({m: io.load_json(Path(a.verify) / m / "dropped.json") for m in a.methods})
+    dropped = logo.merge_dropped({m: io.load_json(Path(a.verify) / m / "dropped.json") for m in a.methods})
     references = sum(len(files) for files in inputs.gallery.values())
-    io.save_json(a.summary, logos.report_summary(decisions, brands, references, vp.score_threshold, pictures,
+    io.save_json(a.summary, logo.report_summary(decisions, brands, references, vp.score_threshold, pictures,
                                                  dropped))
-    io.save_json(a.found, logos.found_plot(decisions, brands))
+    io.save_json(a.found, logo.found_plot(decisions, brands))
     st.made(f"{len(decisions[best])} scenes, detectors {', '.join(a.methods)}, {len(pictures)} pictures -> {out}")
     for d in dropped:
         st.drop(d["item"], f"{', '.join(d['methods'])}: {d['reason']}")

@@ -1,13 +1,13 @@
 """Stage `logo_verify@det`: homography verification and the brand decision per scene; metrics (git-tracked) and the
 precision-recall curve over the scenes with ground truth (an empty curve when none has it).
 
-Writes `decisions.json` (one record per scene, see `cvpipe.logos.scene_record`), `<scene>.npz` with the inliers of
+Writes `decisions.json` (one record per scene, see `cvpipe.logo.scene_record`), `<scene>.npz` with the inliers of
 the best plausible hypothesis, and `dropped.json` (what `logo_match` and this stage did not process, and why).
 """
 
 from pathlib import Path
 
-from cvpipe import datasets, io, logos
+from cvpipe import datasets, io, logo
 from cvpipe.errors import CvpipeError, InputError
 from cvpipe.features import DETECTORS, Features
 from stages._runner import Stage, run
@@ -33,15 +33,15 @@ def logo_verify(st: Stage) -> None:
         try:
             arrays = io.load_npz(Path(a.features) / rel)
             scene, size = Features.from_arrays(arrays), tuple(int(v) for v in arrays["image_size"])
-            matches = logos.Matches.from_arrays(io.load_npz(Path(a.matches) / f"{name}.npz"))
+            matches = logo.Matches.from_arrays(io.load_npz(Path(a.matches) / f"{name}.npz"))
             with st.timer("verify"):
-                det = logos.decide(logos.verify(gallery, matches, scene, size, vp, rng=0), vp)
+                det = logo.decide(logo.verify(gallery, matches, scene, size, vp, rng=0), vp)
         except CvpipeError as exc:
             st.drop(sc.path.relative_to(root).as_posix(), str(exc))
             continue
         best = det.best
         truth = (sc.brand, sc.quad) if sc.labelled else None
-        records.append(logos.scene_record(name, det, gallery.references[best.reference].name if best else None,
+        records.append(logo.scene_record(name, det, gallery.references[best.reference].name if best else None,
                                           truth))
         if best is not None:
             io.save_npz(out / f"{name}.npz", pairs=best.pairs, H=best.H, gallery_xy=best.reference_xy,
@@ -51,8 +51,8 @@ def logo_verify(st: Stage) -> None:
     brands = sorted(inputs.gallery)
     io.save_json(out / "decisions.json", {"detector": a.detector, "brands": brands, "scenes": records})
     io.save_json(out / "dropped.json", io.load_json(Path(a.matches) / "dropped.json") + st.dropped)
-    io.save_json(a.metrics, logos.metrics_of(records, brands, a.detector, vp.score_threshold))
-    io.save_json(a.pr, logos.pr_rows(records, a.detector, vp.score_threshold))
+    io.save_json(a.metrics, logo.metrics_of(records, brands, a.detector, vp.score_threshold))
+    io.save_json(a.pr, logo.pr_rows(records, a.detector, vp.score_threshold))
     found = sum(r["brand"] is not None for r in records)
     st.made(f"{found} of {len(records)} scenes given a brand ({sum(r['labelled'] for r in records)} with ground "
             f"truth) -> {out}")

@@ -6,7 +6,6 @@ dropped and why), plus the metrics file. max_disp: the pair's own (truth.json ``
 else the rectification's estimate from the matches, else ``stereo.disparity.max_disp``. A truth.npz is used only for
 a pair that needed no rectification (it is in the original frame)."""
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +32,7 @@ def read_truth(path: Path, shape: tuple[int, ...]) -> np.ndarray:
 
 def stereo_disparity(st: Stage) -> None:
     a, method = st.args, st.args.method
-    options = dataclasses.asdict(load_section(SECTIONS[f"stereo.{method}"], f"stereo.{method}", a.params))
+    options = load_section(SECTIONS[f"stereo.{method}"], f"stereo.{method}", a.params).model_dump()
     rectified = Path(a.rectified)
     rects = io.load_json(rectified / "run.json")["pairs"]
     pairs, _ = datasets.find_stereo(a.pairs)  # what it drops and what could not be rectified, stereo_rectify recorded

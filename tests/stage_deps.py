@@ -1,5 +1,6 @@
 """The cvpipe/stages modules each DVC stage imports, directly or not (static: every import statement counts,
-also those inside functions). Run ``python tests/stage_deps.py`` to print what each stage of dvc.yaml lacks."""
+also those inside functions). Run ``python tests/stage_deps.py`` to print what each stage of dvc.yaml lacks, and
+``python tests/stage_deps.py --fix`` to rewrite every stage's code deps to exactly what it imports."""
 
 from __future__ import annotations
 
@@ -82,7 +83,40 @@ def missing_deps(dvc_yaml: Path = ROOT / "dvc.yaml") -> dict[str, list[str]]:
     return result
 
 
+def fix_deps(dvc_yaml: Path = ROOT / "dvc.yaml") -> int:
+    """Rewrite each stage's code deps in ``dvc_yaml`` to exactly the files it imports (other deps and comments kept).
+
+    Returns the number of stages whose deps changed."""
+    modules = stage_modules(dvc_yaml)
+    lines = dvc_yaml.read_text(encoding="utf-8").splitlines(keepends=True)
+    out, stage, changed, i = [], None, 0, 0
+    while i < len(lines):
+        line = lines[i]
+        m = re.match(r"^  (\w+):\s*$", line)
+        if m:
+            stage = m.group(1)
+        if stage in modules and line.strip() == "deps:":
+            out.append(line)
+            i += 1
+            block = []
+            while i < len(lines) and lines[i].startswith("      - "):
+                block.append(lines[i])
+                i += 1
+            keep = [b for b in block if not b.strip()[2:].startswith(("cvpipe/", "stages/"))]
+            code = [f"      - {f.relative_to(ROOT).as_posix()}\n" for f in sorted(closure(modules[stage]))]
+            if keep + code != block:
+                changed += 1
+            out.extend(keep + code)
+            continue
+        out.append(line)
+        i += 1
+    dvc_yaml.write_text("".join(out), encoding="utf-8")
+    return changed
+
+
 if __name__ == "__main__":
+    if "--fix" in sys.argv[1:]:
+        print(f"deps rewritten in {fix_deps()} stages")
     for stage, files in missing_deps().items():
         print(f"{stage}:")
         for f in files:

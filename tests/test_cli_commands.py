@@ -99,7 +99,7 @@ def test_a_command_imports_only_what_it_runs(workdir):
     img = workdir / "data" / "samples" / "hough" / "synthetic_grid.png"
     code = ("import sys\nfrom cvpipe import cli\n"
             f"cli.main(['hough', {str(img)!r}, '--method', 'opencv', '--json'])\n"
-            "heavy = ('scipy.stats', 'scipy.sparse', 'cvpipe.logos', 'cvpipe.stereo', 'cvpipe.panorama',"
+            "heavy = ('scipy.stats', 'scipy.sparse', 'cvpipe.logo', 'cvpipe.stereo', 'cvpipe.panorama',"
             " 'cvpipe.defect', 'cvpipe.homography')\n"
             "print('RESULT', ','.join(sorted(m for m in heavy if m in sys.modules)) or '-', file=sys.stderr)\n")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=_env(), cwd=ROOT)
@@ -407,25 +407,3 @@ def test_two_gallery_brands_in_one_photo_are_both_found(workdir, tmp_path, capsy
     for brand, quad in found.items():
         # corners within 5 px of where the mark was pasted (2% of the ~260 px mark; each outline rests on 70+ inliers)
         assert np.abs(quad - truth[brand]).max() < 5.0, brand
-
-
-def test_overlapping_outlines_keep_only_the_best():
-    from types import SimpleNamespace
-
-    from cvpipe.commands.logo import every_logo, quad_iou
-
-    sq = np.array([[0, 0], [100, 0], [100, 100], [0, 100]], float)
-    assert quad_iou(sq, sq) == pytest.approx(1.0)
-    assert quad_iou(sq, sq + [200, 0]) == 0.0
-    assert quad_iou(sq, sq + [50, 0]) == pytest.approx(50 * 100 / (2 * 100 * 100 - 50 * 100))  # 1/3
-
-    def hyp(brand, score, quad, plausible=True):
-        return SimpleNamespace(brand=brand, score=score, inliers=20, quad=quad, plausible=plausible)
-
-    det = SimpleNamespace(hypotheses=[
-        hyp("a", 50.0, sq), hyp("b", 40.0, sq + [10, 10]),  # b overlaps a (IoU 0.68): suppressed
-        hyp("c", 30.0, sq + [300, 0]),  # elsewhere: kept
-        hyp("d", 90.0, sq + [600, 0], plausible=False),  # implausible: never reported
-        hyp("e", -1.0, sq + [900, 0])])  # below the threshold 0
-    assert [h.brand for h in every_logo(det, 0.0)] == ["a", "c"]
-    assert [h.brand for h in every_logo(det, 0.0, max_overlap=0.9)] == ["a", "b", "c"]

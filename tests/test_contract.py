@@ -291,8 +291,8 @@ def test_stitch_checks_the_output_before_stitching(capsys, monkeypatch, views, t
 
 @pytest.mark.parametrize("option", [["--theta-deg", "0.0001"], ["--rho", "0.0001"]])
 def test_hough_tiny_steps_refused_before_allocating(capsys, monkeypatch, views, option):
-    monkeypatch.setattr(hough, "hough_accumulator", lambda *a, **k: pytest.fail("accumulator allocated"))
-    monkeypatch.setattr(hough, "_grid", lambda *a, **k: pytest.fail("tables allocated"))
+    monkeypatch.setattr(hough.transform, "hough_accumulator", lambda *a, **k: pytest.fail("accumulator allocated"))
+    monkeypatch.setattr(hough.transform, "_grid", lambda *a, **k: pytest.fail("tables allocated"))
     code, lines, doc = run_main(capsys, ["hough", views["a"], *option, "--json"])
     line = only_error_line(lines)
     assert code == 2 and "--theta-deg" in line and "--rho" in line and "memory budget" in line

@@ -4,7 +4,6 @@ misalignment, lighting and noise, and probes that cannot be registered are error
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -13,7 +12,7 @@ import pytest
 from cvpipe import cli, defect, io
 from cvpipe.errors import EstimationError, InputError
 from cvpipe.metrics import DetectionCounts, box_iou, corner_error, match_boxes
-from cvpipe.params import DefectDiffParams, DefectRegionParams, DefectRegisterParams
+from cvpipe.params import DefectDiffParams, DefectRegionParams, DefectRegisterParams, replace
 
 SIZE = 320
 

@@ -12,13 +12,13 @@ from cvpipe.errors import EstimationError, InputError
 from cvpipe.homography import (
     METHODS,
     HomographyFit,
-    _minimal_solve,
     dlt,
     estimate,
     find_homography,
     hartley_normalization,
     transform_points,
 )
+from cvpipe.homography._ransac_kernels import _minimal_solve
 from cvpipe.metrics import corner_error, image_corners
 
 W, H_IMG = 640, 480
@@ -401,3 +401,15 @@ def test_many_to_one_cluster_does_not_win_with_a_collapsed_model(seed):
     fit = find_homography(src, dst, 3.0, rng=seed)
     assert corner_error(fit.H, H_true, 640, 480) < 3.0
     assert not fit.inliers[30:54].any()
+
+
+@pytest.mark.parametrize("name", ["cvpipe.geometry", "cvpipe.homography.dlt", "cvpipe.homography.estimate",
+                                  "cvpipe.homography.match", "cvpipe.homography.report", "cvpipe.linalg"])
+def test_examples_in_docstrings_run(name):
+    """The Examples sections of the public homography modules (and the shared geometry) are true."""
+    import doctest
+    import importlib
+
+    # import_module, not attribute access: cvpipe.homography.estimate is also the name of the function
+    result = doctest.testmod(importlib.import_module(name), optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    assert result.attempted > 0 and result.failed == 0, result

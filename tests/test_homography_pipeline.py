@@ -223,11 +223,12 @@ def test_cli_and_bench_argument_checks(pair_files, capsys):
 
 
 @pytest.mark.parametrize("cls, mapping, message", [
-    ("HomographyEstimateParams", {"threshold": 0.0}, r"`threshold` must be in \(0\.0, inf\]"),
-    ("HomographyEstimateParams", {"confidence": 1.0}, r"`confidence` must be in \(0, 1\), got 1\.0"),
-    ("HomographyEstimateParams", {"max_iters": 0}, r"`max_iters` must be in \[1, 10000000\]"),
-    ("HomographyReportParams", {"success_px": -1.0}, r"`success_px` must be in \(0\.0, inf\]"),
-    ("HomographyReportParams", {"checker_tiles": 0}, r"`checker_tiles` must be in \[1, 256\]"),
+    ("HomographyEstimateParams", {"threshold": 0.0}, r"`homography\.x\.threshold` must be in \(0\.0, inf\]"),
+    ("HomographyEstimateParams", {"confidence": 1.0},
+     r"`homography\.x\.confidence` must be in \(0\.0, 1\.0\), got 1\.0"),
+    ("HomographyEstimateParams", {"max_iters": 0}, r"`homography\.x\.max_iters` must be in \[1, 10000000\]"),
+    ("HomographyReportParams", {"success_px": -1.0}, r"`homography\.x\.success_px` must be in \(0\.0, inf\]"),
+    ("HomographyReportParams", {"checker_tiles": 0}, r"`homography\.x\.checker_tiles` must be in \[1, 256\]"),
 ])
 def test_homography_params_ranges(cls, mapping, message):
     from cvpipe import params

@@ -1,18 +1,24 @@
-"""cvpipe.params: unknown or mistyped keys are rejected by name; params.yaml agrees with the dataclass defaults."""
+"""cvpipe.params: every range and choice declared on a field refuses a value outside it with a one-line message naming
+the dotted key; unknown keys and bools-for-numbers are refused; params.yaml agrees with the model defaults.
+
+The range, choice and cross-field cases are generated from the models' own constraint metadata, so a new field or
+section is tested by declaring it."""
 
 import dataclasses
-from dataclasses import dataclass
-from typing import Literal, Optional
+import re
+import typing
+from typing import Annotated, Literal, Optional
 
+import annotated_types
 import pytest
 
-from cvpipe import params
+from cvpipe import features, params
 from cvpipe.errors import InputError
-from cvpipe.params import FeaturesParams, MatchParams, from_mapping, load_section, read_params_file
+from cvpipe.params import (Bound, FeaturesParams, HoughLinesParams, InspectParams, MatchParams, Section,
+                           StereoSgmParams, from_mapping, load_inspect_params, load_section, read_params_file, replace)
 
 
-@dataclass(frozen=True)
-class Demo:
+class Demo(Section):
     n: int = 3
     x: float = 0.5
     flag: bool = False
@@ -20,27 +26,34 @@ class Demo:
     mode: Literal["fast", "slow"] = "fast"
     pair: tuple[int, int] = (1, 2)
     opt: Optional[float] = None
+    hi: Annotated[int, Bound(">=", "n")] = 5
 
 
 def test_defaults_and_conversion():
     d = from_mapping(Demo, {"x": 2, "pair": [3, 4], "opt": 1}, "demo")
     assert d == Demo(x=2.0, pair=(3, 4), opt=1.0)
-    assert isinstance(d.x, float)
+    assert isinstance(d.x, float) and isinstance(d.opt, float)  # an int is a float, stored as one
     assert from_mapping(Demo, None, "demo") == Demo()
 
 
 @pytest.mark.parametrize("mapping, message", [
-    ({"nn": 1}, r"unknown key `demo\.nn`.*expected one of: flag, mode, n, name, opt, pair, x"),
-    ({"n": 1.5}, r"`demo\.n` must be an integer, got 1\.5"),
-    ({"n": True}, r"`demo\.n` must be an integer"),
-    ({"x": "big"}, r"`demo\.x` must be a number"),
-    ({"flag": 1}, r"`demo\.flag` must be true or false"),
-    ({"name": 3}, r"`demo\.name` must be a string"),
-    ({"mode": "medium"}, r"`demo\.mode` must be one of \['fast', 'slow'\]"),
-    ({"pair": [1]}, r"`demo\.pair` must be a list of 2 values"),
-    ({"pair": 5}, r"`demo\.pair` must be a list"),
-    ({"pair": [1, "b"]}, r"`demo\.pair\[1\]` must be an integer"),
-    ({"opt": "x"}, r"`demo\.opt` must be a number"),
+    ({"nn": 1}, r"unknown key `demo\.nn` in params; expected one of: flag, hi, mode, n, name, opt, pair, x$"),
+    ({"n": 1.5}, r"`demo\.n` must be an integer, got 1\.5$"),
+    ({"n": 3.0}, r"`demo\.n` must be an integer, got 3\.0$"),
+    ({"n": True}, r"`demo\.n` must be an integer, got True$"),
+    ({"x": "big"}, r"`demo\.x` must be a number, got 'big'$"),
+    ({"x": "3"}, r"`demo\.x` must be a number, got '3'$"),
+    ({"x": False}, r"`demo\.x` must be a number, got False$"),
+    ({"flag": 1}, r"`demo\.flag` must be true or false, got 1$"),
+    ({"name": 3}, r"`demo\.name` must be a string, got 3$"),
+    ({"mode": "medium"}, r"`demo\.mode` must be one of \['fast', 'slow'\], got 'medium'$"),
+    ({"pair": [1]}, r"`demo\.pair` must be a list of 2 values, got \[1\]$"),
+    ({"pair": [1, 2, 3]}, r"`demo\.pair` must be a list of 2 values, got \[1, 2, 3\]$"),
+    ({"pair": 5}, r"`demo\.pair` must be a list, got 5$"),
+    ({"pair": [1, "b"]}, r"`demo\.pair\[1\]` must be an integer, got 'b'$"),
+    ({"opt": "x"}, r"`demo\.opt` must be a number, got 'x'$"),
+    ({"hi": 2}, r"`demo\.hi` must be in \[3, inf\], got 2 \(the lower limit is `demo\.n`\)$"),
+    ({"n": 9}, r"`demo\.hi` must be in \[9, inf\], got 5 \(the lower limit is `demo\.n`\)$"),
 ])
 def test_rejections_name_the_key(mapping, message):
     with pytest.raises(InputError, match=message):
@@ -52,11 +65,53 @@ def test_section_not_a_mapping():
         from_mapping(Demo, [1, 2], "demo")
 
 
-def test_range_checks_name_the_parameter():
-    with pytest.raises(InputError, match=r"`ratio` must be in \(0\.0, 1\.0\], got 1\.5"):
-        from_mapping(MatchParams, {"ratio": 1.5}, "homography.match")
-    with pytest.raises(InputError, match=r"`max_features` must be in \[1, 1000000\], got 0"):
+def test_examples_from_the_issue():
+    with pytest.raises(InputError, match=r"^`hough\.lines\.theta_deg` must be in \(0\.0, 180\.0\], got -1$"):
+        from_mapping(HoughLinesParams, {"theta_deg": -1}, "hough.lines")
+    with pytest.raises(InputError, match=r"^`stereo\.sgm\.paths` must be one of \[4, 8\], got 6$"):
+        from_mapping(StereoSgmParams, {"paths": 6}, "stereo.sgm")
+    with pytest.raises(InputError, match=r"^unknown key `homography\.match\.foo` in params; expected one of: "
+                                         r"cross_check, ratio$"):
+        from_mapping(MatchParams, {"foo": 1}, "homography.match")
+    with pytest.raises(InputError, match=r"`homography\.features\.max_features` must be in \[1, 1000000\], got 0"):
         from_mapping(FeaturesParams, {"max_features": 0}, "homography.features")
+    with pytest.raises(InputError, match=r"^`panorama\.match\.candidates` must be in \[0, inf\], got -1$"):
+        from_mapping(params.PanoramaMatchParams, {"candidates": -1}, "panorama.match")
+    # a field's own limit and the one another field sets are shown together, whichever is broken
+    with pytest.raises(InputError, match=r"^`panorama\.match\.refit_threshold` must be in \[0\.0, 5\.0\], got -1\.0 "
+                                         r"\(the upper limit is `panorama\.match\.ransac_threshold`\)$"):
+        from_mapping(params.PanoramaMatchParams, {"ransac_threshold": 5.0, "refit_threshold": -1.0}, "panorama.match")
+
+
+def test_models_built_in_python_name_the_field():
+    """Python callers get the same check; the message names the bare field (no section is known there)."""
+    with pytest.raises(ValueError, match=r"^`rho` must be in \(0\.0, 100\.0\], got -1$") as info:
+        HoughLinesParams(rho=-1)
+    assert isinstance(info.value, InputError)
+    with pytest.raises(InputError, match=r"^`regions` must be a DefectRegionParams, got int$"):
+        InspectParams(regions=3)
+
+
+def test_replace_validates_and_keeps_dataclasses():
+    p = InspectParams()
+    q = replace(p, regions=replace(p.regions, pad=9.0))
+    assert q.regions.pad == 9.0 and q.features == p.features and p.regions.pad == 0.0
+    with pytest.raises(InputError, match=r"^`ratio` must be in \(0\.0, 1\.0\], got 2\.0$"):
+        replace(MatchParams(), ratio=2.0)
+    with pytest.raises(InputError, match=r"`seed_threshold` must be in \[0\.5, 1\.0\], got 0\.3 \(the lower limit"):
+        p.regions.replace(threshold=0.5)  # now above seed_threshold 0.3
+
+    @dataclasses.dataclass(frozen=True)
+    class Plain:
+        a: int = 1
+    assert replace(Plain(), a=2) == Plain(a=2)
+
+
+def test_models_are_frozen_and_hashable():
+    p = MatchParams()
+    with pytest.raises(ValueError):
+        p.ratio = 0.5
+    assert hash(p) == hash(MatchParams()) and p == MatchParams() and p != MatchParams(ratio=0.5)
 
 
 def test_file_errors(tmp_path):
@@ -84,8 +139,8 @@ def test_unsafe_yaml_is_not_executed(tmp_path):
         read_params_file(evil)
 
 
-def test_params_yaml_agrees_with_dataclass_defaults(repo_root):
-    """Defaults are declared once (the dataclasses); params.yaml must say the same for every registered section."""
+def test_params_yaml_agrees_with_model_defaults(repo_root):
+    """Defaults are declared once (the models); params.yaml must say the same for every registered section."""
     data = read_params_file(repo_root / "params.yaml")
     for section, cls in params.SECTIONS.items():
         node = data
@@ -94,4 +149,126 @@ def test_params_yaml_agrees_with_dataclass_defaults(repo_root):
             node = node[part]
         loaded = from_mapping(cls, node, section)
         assert loaded == cls(), f"params.yaml section {section} differs from {cls.__name__} defaults"
-        assert set(node) == {f.name for f in dataclasses.fields(cls)}, f"{section}: keys differ from {cls.__name__}"
+        assert set(node) == set(cls.model_fields), f"{section}: keys differ from {cls.__name__}"
+    assert load_inspect_params(repo_root / "params.yaml") == InspectParams()
+
+
+def test_detector_choices_are_the_registry():
+    """Every `detector` field accepts exactly the detectors cvpipe.features can build."""
+    seen = 0
+    for section, cls in params.SECTIONS.items():
+        if "detector" in cls.model_fields:
+            assert set(typing.get_args(cls.model_fields["detector"].annotation)) == set(features.DETECTORS), section
+            seen += 1
+    assert seen >= 4  # homography, defect, panorama, logo
+
+
+# ------------------------------------------------------------------ cases generated from the constraint metadata
+
+
+def _fields():
+    for section, cls in params.SECTIONS.items():
+        for name, info in cls.model_fields.items():
+            yield section, cls, name, info
+
+
+def _range_cases():
+    """(section, cls, field, bad value, the violated limit as printed) for each Field limit of every section."""
+    for section, cls, name, info in _fields():
+        for m in info.metadata:
+            if isinstance(m, annotated_types.Gt):
+                yield pytest.param(section, cls, name, m.gt, f"({m.gt!r}, ", id=f"{section}.{name}>")
+            elif isinstance(m, annotated_types.Ge):
+                yield pytest.param(section, cls, name, m.ge - 1, f"[{m.ge!r}, ", id=f"{section}.{name}>=")
+            elif isinstance(m, annotated_types.Lt):
+                yield pytest.param(section, cls, name, m.lt, f", {m.lt!r})", id=f"{section}.{name}<")
+            elif isinstance(m, annotated_types.Le):
+                yield pytest.param(section, cls, name, m.le + 1, f", {m.le!r}]", id=f"{section}.{name}<=")
+
+
+def _choice_cases():
+    for section, cls, name, info in _fields():
+        if typing.get_origin(info.annotation) is Literal:
+            choices = list(typing.get_args(info.annotation))
+            bad = "not-a-choice" if isinstance(choices[0], str) else max(choices) + 1
+            yield pytest.param(section, cls, name, choices, bad, id=f"{section}.{name}")
+
+
+def _bound_cases():
+    for section, cls, name, info in _fields():
+        for b in info.metadata:
+            if isinstance(b, Bound):
+                limit = getattr(cls(), b.other)
+                # just past the limit: below it for a lower limit (>= and >), above it for an upper one (<=)
+                bad = {">=": limit - 1, ">": limit, "<=": limit + 1}[b.op]
+                yield pytest.param(section, cls, name, b, limit, bad, id=f"{section}.{name}{b.op}{b.other}")
+
+
+RANGES, CHOICES, BOUNDS = list(_range_cases()), list(_choice_cases()), list(_bound_cases())
+
+
+def test_the_generators_find_the_declared_checks():
+    """A sanity check of the generators themselves: the issue's examples and the cross-field rules are among them."""
+    ids = {c.id for c in RANGES + CHOICES + BOUNDS}
+    assert {"hough.lines.theta_deg>", "stereo.sgm.paths", "logo.features.detector", "stereo.sgm.p2>p1",
+            "hough.edges.canny_high>=canny_low", "panorama.match.refit_threshold<=ransac_threshold",
+            "logo.match.per_reference<=k", "defect.regions.seed_threshold>=threshold"} <= ids
+    assert len(RANGES) >= 70 and len(CHOICES) >= 10 and len(BOUNDS) >= 6
+
+
+@pytest.mark.parametrize("section, cls, name, bad, shown", RANGES)
+def test_every_range_has_a_message(section, cls, name, bad, shown):
+    for build, key in ((lambda: from_mapping(cls, {name: bad}, section), f"{section}.{name}"),
+                       (lambda: cls(**{name: bad}), name)):
+        with pytest.raises(InputError) as info:
+            build()
+        msg = str(info.value)
+        # "`key` must be in [lo, hi], got bad", and "(the upper limit is `other`)" when another field sets one side
+        assert re.fullmatch(rf"`{re.escape(key)}` must be in [\[(]\S+, \S+[\])], got {re.escape(repr(bad))}"
+                            r"( \(the (lower|upper) limit is `[\w.]+`\))?", msg), msg
+        assert shown in msg, (msg, shown)
+
+
+@pytest.mark.parametrize("section, cls, name, choices, bad", CHOICES)
+def test_every_choice_has_a_message(section, cls, name, choices, bad):
+    with pytest.raises(InputError, match=r"^" + re.escape(
+            f"`{section}.{name}` must be one of {choices}, got {bad!r}") + "$"):
+        from_mapping(cls, {name: bad}, section)
+    for c in choices:  # and every choice is accepted
+        assert getattr(from_mapping(cls, {name: c}, section), name) == c
+
+
+@pytest.mark.parametrize("section, cls, name, bound, limit, bad", BOUNDS)
+def test_every_cross_field_limit_has_a_message(section, cls, name, bound, limit, bad):
+    with pytest.raises(InputError) as info:
+        from_mapping(cls, {name: bad}, section)
+    msg = str(info.value)
+    side = "upper" if bound.op == "<=" else "lower"
+    shown = {"<=": f", {limit!r}]", ">=": f"[{limit!r}, ", ">": f"({limit!r}, "}[bound.op]
+    assert msg.startswith(f"`{section}.{name}` must be in ") and shown in msg, (msg, shown)
+    assert msg.endswith(f", got {bad!r} (the {side} limit is `{section}.{bound.other}`)"), msg
+    if bound.op != ">":  # an inclusive limit is itself accepted
+        assert getattr(from_mapping(cls, {name: limit}, section), name) == limit
+
+
+@pytest.mark.parametrize("section, cls", [pytest.param(s, c, id=s) for s, c in params.SECTIONS.items()])
+def test_unknown_keys_refused(section, cls):
+    with pytest.raises(InputError, match=r"^unknown key `" + section.replace(".", r"\.") + r"\.nope` in params; "
+                                         r"expected one of: " + ", ".join(sorted(cls.model_fields)) + "$"):
+        from_mapping(cls, {"nope": 1}, section)
+
+
+NUMBERS = [pytest.param(s, c, n, info.annotation, id=f"{s}.{n}") for s, c, n, info in _fields()
+           if info.annotation in (int, float)]
+
+
+@pytest.mark.parametrize("section, cls, name, tp", NUMBERS)
+def test_bools_and_strings_refused_for_numbers(section, cls, name, tp):
+    word = "an integer" if tp is int else "a number"
+    default = cls.model_fields[name].default
+    for bad in (True, False, str(default)):
+        with pytest.raises(InputError, match=r"^`" + f"{section}.{name}".replace(".", r"\.") + f"` must be {word}, "):
+            from_mapping(cls, {name: bad}, section)
+    if tp is float and float(default).is_integer():  # 3 is accepted for 3.0, and stored as a float
+        got = getattr(from_mapping(cls, {name: int(default)}, section), name)
+        assert got == default and isinstance(got, float)

@@ -266,8 +266,17 @@ def test_every_plot_file_is_written_by_a_stage(repo_root):
     dvc = yaml.safe_load((repo_root / "dvc.yaml").read_text())
     outs = []
     for st in dvc["stages"].values():
-        for o in st.get("outs", []) + st.get("plots", []):
-            outs.append(next(iter(o)) if isinstance(o, dict) else o)
+        # a matrix stage writes one file per item: expand ${item.<key>} for every value
+        items = [{}]
+        for key, values in (st.get("matrix") or {}).items():
+            items = [{**it, key: v} for it in items for v in values]
+        for o in st.get("outs", []) + st.get("plots", []) + st.get("metrics", []):
+            name = next(iter(o)) if isinstance(o, dict) else o
+            for it in items:
+                expanded = name
+                for key, v in it.items():
+                    expanded = expanded.replace("${item.%s}" % key, str(v))
+                outs.append(expanded)
     for entry in dvc["plots"]:
         path = next(iter(entry)) if isinstance(entry, dict) else entry
         cfg = entry[path] if isinstance(entry, dict) else {}

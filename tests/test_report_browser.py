@@ -64,13 +64,17 @@ def open_page(driver, page: Path) -> tuple[list, list]:
 
 def render(root: Path) -> Path:
     """Run the report stage in ``root`` (a fake repository) and return the page."""
-    from stages import report as stage
+    import runpy
 
     cwd, argv = os.getcwd(), sys.argv
     try:
         os.chdir(root)
-        sys.argv = ["stages.report"]
-        stage.main()
+        sys.argv = ["stages.report", "--outputs", "outputs", "--out", "outputs/report.html",
+                    "--timings", "outputs/plots/timings.json"]
+        try:
+            runpy.run_module("stages.report", run_name="__main__")
+        except SystemExit as exc:  # the stage runner always exits; 0 is success
+            assert exc.code == 0, f"the report stage failed with exit {exc.code}"
     finally:
         os.chdir(cwd)
         sys.argv = argv

@@ -1,7 +1,6 @@
 """cvpipe.stereo: semi-global matching on random-dot pairs with a known disparity field, the OpenCV wrappers, the
 dense-map metrics, validation messages, the `cvpipe stereo` command and (with CVPIPE_DATA) one Middlebury pair."""
 
-import dataclasses
 import inspect
 import json
 import os
@@ -197,12 +196,12 @@ def test_opencv_and_registry_validation():
 
 
 def test_params_defaults_match_the_functions():
-    """The params dataclasses are the declared defaults; the library functions must not drift from them."""
+    """The params models are the declared defaults; the library functions must not drift from them."""
     for cls, fn in ((StereoSgmParams, stereo.disparity_sgm), (StereoBmParams, stereo.disparity_opencv_bm),
                     (StereoSgbmParams, stereo.disparity_opencv_sgbm)):
         sig = inspect.signature(fn).parameters
-        for f in dataclasses.fields(cls):
-            assert sig[f.name].default == f.default, (cls.__name__, f.name)
+        for name, f in cls.model_fields.items():
+            assert sig[name].default == f.default, (cls.__name__, name)
 
 
 # ----------------------------------------------------------------------------------------------- results

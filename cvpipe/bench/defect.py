@@ -14,7 +14,6 @@ import argparse
 import os
 import statistics
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -26,7 +25,7 @@ from ..errors import CvpipeError, InputError
 from ..features import detect
 from ..matching import match
 from ..metrics import DetectionCounts, match_boxes
-from ..params import InspectParams
+from ..params import InspectParams, replace
 
 HELP = "defect inspection on DeepPCB pairs warped by random homographies (ours vs the seed's plain difference)"
 EXAMPLE = "cvpipe bench defect --data ../shared/data --limit 20"

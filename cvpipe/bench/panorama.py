@@ -22,7 +22,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +33,7 @@ from ..panorama import warp as warping
 from ..errors import EstimationError, InputError
 from ..metrics import corner_error
 from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
-                      PanoramaWarpParams)
+                      PanoramaWarpParams, replace)
 
 HELP = "panorama stitching vs cv2.Stitcher on the Adobe and OpenStitching sets"
 EXAMPLE = "cvpipe bench panorama --data ../shared/data --repeat 3 --json"

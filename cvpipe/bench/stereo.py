@@ -18,7 +18,6 @@ With ``--rectify`` the benchmark is the rectification one instead (``cvpipe.benc
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import time
 from pathlib import Path
@@ -141,8 +140,8 @@ def run(args: argparse.Namespace) -> int:
     probe = pairs["tsukuba"][0]
     first_call = _timed(lambda: stereo.disparity_sgm(probe, pairs["tsukuba"][1], 16))[0]
 
-    sgm = dataclasses.asdict(StereoSgmParams())
-    bm = dataclasses.asdict(StereoBmParams())
+    sgm = StereoSgmParams().model_dump()
+    bm = StereoBmParams().model_dump()
     rows, sgbm_choice = [], {}
     for name, (left, right, truth) in tqdm(pairs.items(), desc="bench stereo", disable=None):
         nd = disparity_range(truth)

@@ -107,8 +107,10 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"`--max-lines` must be >= 0 (0 = all), got {args.max_lines}")
     if method == "ours":
         # the serial or the parallel vote, whichever this run will use (hough_accumulator's own choice)
-        vote = hough._vote_parallel if hough._use_parallel(None) else hough._vote_serial
-        compile_note("hough", (hough, [hough._edge_points, vote, hough._peaks]))
+        from ..hough import _kernels, transform
+
+        vote = _kernels._vote_parallel if transform._use_parallel(None) else _kernels._vote_serial
+        compile_note("hough", (_kernels, [_kernels._edge_points, vote, _kernels._peaks]))
     scheduler = check_scheduler(args.scheduler, "--scheduler")
     kwargs = {"refine": True} if args.refine else {}
     shared = (HoughEdgesParams(), tuple(args.canny), method, args.rho, math.radians(args.theta_deg), args.threshold,

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 from typing import TYPE_CHECKING
 
-from ..params import InspectParams
+from ..params import InspectParams, replace
 from . import compile_note, overlay_paths, progress, with_flags
 
 if TYPE_CHECKING:

@@ -12,7 +12,7 @@ from ..params import LogoFeaturesParams, LogoMatchParams, LogoVerifyParams
 from . import compile_note, overlay_paths, progress, step
 
 if TYPE_CHECKING:
-    from .. import logos
+    from .. import logo
 
 HELP = "recognise gallery logos in scene photos (brand or none, and the logo outline)"
 EXAMPLE = ("cvpipe logo data/samples/logo/scenes/scene_00.jpg --gallery data/samples/logo/gallery "
@@ -45,31 +45,31 @@ def gallery_files(folder: str | Path) -> list[tuple[str, Path]]:
     return sorted(items, key=lambda t: (t[0], str(t[1])))
 
 
-def gallery_references(folder: str | Path, detector: str, max_features: int) -> list[logos.Reference]:
+def gallery_references(folder: str | Path, detector: str, max_features: int) -> list[logo.Reference]:
     """Read and detect every reference of a gallery folder (see :func:`gallery_files`)."""
-    from .. import io, logos
+    from .. import io, logo
     from ..features import detect
 
     refs = []
     for brand, f in progress(gallery_files(folder), "gallery"):
         gray = io.read_image(f, "gray")
-        refs.append(logos.Reference(brand, str(f), detect(gray, detector, max_features),
+        refs.append(logo.Reference(brand, str(f), detect(gray, detector, max_features),
                                     (gray.shape[1], gray.shape[0])))
     return refs
 
 
-def load_gallery(folder: str | Path, detector: str, max_features: int, params: LogoMatchParams) -> logos.Gallery:
+def load_gallery(folder: str | Path, detector: str, max_features: int, params: LogoMatchParams) -> logo.Gallery:
     """Read, detect and index a gallery folder (see :func:`gallery_files`)."""
-    from .. import logos
+    from .. import logo
 
     refs = gallery_references(folder, detector, max_features)
-    return logos.build_gallery(refs, params.min_features, params.reference_features, params.register_references)
+    return logo.build_gallery(refs, params.min_features, params.reference_features)
 
 
 class SharedGallery:
     """The gallery's references, indexed where they land (once per worker).
 
-    The trained matcher inside :class:`cvpipe.logos.Gallery` is an OpenCV object that cannot be pickled, so the
+    The trained matcher inside :class:`cvpipe.logo.Gallery` is an OpenCV object that cannot be pickled, so the
     references travel and the index is rebuilt on first use; the rebuild is deterministic, so every worker matches
     exactly as this process does.
     """
@@ -84,14 +84,13 @@ class SharedGallery:
         self.__init__(state["references"], state["params"])
 
     @property
-    def gallery(self) -> logos.Gallery:
+    def gallery(self) -> logo.Gallery:
         """The indexed gallery (built on first access)."""
         if self._gallery is None:
-            from .. import logos
+            from .. import logo
 
             p = self.params
-            self._gallery = logos.build_gallery(self.references, p.min_features, p.reference_features,
-                                                p.register_references)
+            self._gallery = logo.build_gallery(self.references, p.min_features, p.reference_features)
         return self._gallery
 
 
@@ -126,49 +125,18 @@ def recognize_scene(item: tuple, shared: tuple) -> tuple[dict, list, list]:
     quads, labels : list
         The outline and the label of every logo found, best first, for the overlay.
     """
-    from .. import logos
+    from .. import logo
     from ..features import detect
 
     scene, gray, error = item
     if error is not None:
         raise error
     g, method, max_features, min_long_side, mp, vp, seed = shared
-    det = logos.recognize(g.gallery, detect(gray, method, max_features, min_long_side=min_long_side),
+    det = logo.recognize(g.gallery, detect(gray, method, max_features, min_long_side=min_long_side),
                           (gray.shape[1], gray.shape[0]), mp, vp, seed)
-    found = every_logo(det, vp.score_threshold)
+    found = logo.every_logo(det, vp.score_threshold)
     return (detection_json(scene, det, found), [h.quad for h in found],
             [f"{h.brand} ({h.score:.0f})" for h in found])
-
-
-#: two found outlines overlapping by more than this intersection-over-union are one logo (the better one is kept)
-MAX_OVERLAP = 0.3
-
-
-def quad_iou(a, b) -> float:
-    """Intersection over union of two convex quadrilaterals ((4, 2) corner arrays, scene pixels)."""
-    import cv2
-    import numpy as np
-
-    pa, pb = np.asarray(a, np.float32).reshape(4, 2), np.asarray(b, np.float32).reshape(4, 2)
-    area_a, area_b = abs(cv2.contourArea(pa)), abs(cv2.contourArea(pb))
-    inter, _ = cv2.intersectConvexConvex(pa, pb)
-    union = area_a + area_b - inter
-    return float(inter / union) if union > 0 else 0.0
-
-
-def every_logo(det: logos.Detection, score_threshold: float, max_overlap: float = MAX_OVERLAP) -> list:
-    """Every plausible hypothesis of a scene that reaches ``score_threshold``, best first, after non-maximum
-    suppression: a hypothesis whose outline overlaps a better one by more than ``max_overlap`` IoU is dropped.
-
-    The first entry, when there is one, is the scene's ``brand`` (the same ordering as ``logos.decide``).
-    """
-    good = sorted((h for h in det.hypotheses if h.plausible and h.quad is not None and h.score >= score_threshold),
-                  key=lambda h: (h.score, h.inliers), reverse=True)
-    kept: list = []
-    for h in good:
-        if all(quad_iou(h.quad, k.quad) <= max_overlap for k in kept):
-            kept.append(h)
-    return kept
 
 
 def _logo_json(h) -> dict:
@@ -176,7 +144,7 @@ def _logo_json(h) -> dict:
             "quad": [[round(float(x), 2), round(float(y), 2)] for x, y in h.quad]}
 
 
-def detection_json(scene: str, det: logos.Detection, found: list | None = None) -> dict:
+def detection_json(scene: str, det: logo.Detection, found: list | None = None) -> dict:
     """The interface-contract record of one scene (``score`` is null when no hypothesis survived)."""
     return {"scene": scene, "brand": det.brand, "inliers": int(det.inliers),
             "score": round(float(det.score), 3) if math.isfinite(det.score) else None,

@@ -5,7 +5,6 @@ calibration its depth and coloured point cloud."""
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 from typing import TYPE_CHECKING
 
@@ -96,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     info, geometry, left, right, auto_disp = _prepare(args, left, right, calib)
     max_disp = auto_disp if args.max_disp == "auto" else args.max_disp
     method, params_cls = args.method, CLI_METHODS[args.method]
-    options = dataclasses.asdict(params_cls())
+    options = params_cls().model_dump()
     if method == "sgm":
         compile_note("stereo", stereo)
     with step(f"disparity ({method})"):

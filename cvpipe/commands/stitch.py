@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 from pathlib import Path
 
 from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
-                      PanoramaWarpParams)
+                      PanoramaWarpParams, replace)
 from . import compile_note, progress, step, with_flags
 
 HELP = "stitch overlapping photos (any order) into one seamless, cropped panorama"

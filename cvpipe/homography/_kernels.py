@@ -1,0 +1,483 @@
+"""Numba kernels of the homography estimator: reprojection errors, Hartley normalization, least squares and
+Levenberg-Marquardt refinement. They only compute: callers validate (see :mod:`cvpipe.homography.estimate`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..linalg import cholesky_solve  # the one SPD solve, shared with the panorama's adjustment
+
+#: relative size of the smaller principal axis below which a whole point set counts as collinear (1e-7: the
+#: 2x2 covariance resolves eigenvalue ratios down to ~1e-15, i.e. axis ratios down to ~3e-8)
+_ALL_COLLINEAR_EPS = 1e-7
+#: index into the 6 unique entries (xx, xy, x, yy, y, 1) of a symmetric 3x3 p p^T
+_SYM6 = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]], dtype=np.int64)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _matmul3(A, B, out):
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
+
+
+@njit(cache=True, error_model="numpy")
+def _similarity(s, tx, ty):
+    """The 3x3 matrix [[s, 0, tx], [0, s, ty], [0, 0, 1]]."""
+    T = np.zeros((3, 3))
+    T[0, 0] = s
+    T[1, 1] = s
+    T[0, 2] = tx
+    T[1, 2] = ty
+    T[2, 2] = 1.0
+    return T
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _sq_error(H, x, y, u, v):
+    """Squared one-sided reprojection error ``|| dehom(H [x, y, 1]) - (u, v) ||^2`` (inf when mapped to infinity):
+    the one reprojection loop body of the estimator (scoring, least-squares masks, refinement cost)."""
+    w = H[2, 0] * x + H[2, 1] * y + H[2, 2]
+    if w == 0.0:
+        return np.inf
+    du = (H[0, 0] * x + H[0, 1] * y + H[0, 2]) / w - u
+    dv = (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w - v
+    return du * du + dv * dv
+
+
+@njit(cache=True, error_model="numpy")
+def _sq_errors(src, dst, H, out):
+    """Squared one-sided reprojection error per correspondence (inf when mapped to infinity)."""
+    for i in range(src.shape[0]):
+        out[i] = _sq_error(H, src[i, 0], src[i, 1], dst[i, 0], dst[i, 1])
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def _score(src, dst, H, thr2, bail, A, eps, delta):
+    """Evaluate H point by point: (MSAC cost, inliers so far, points evaluated, status).
+
+    status 0: all points evaluated; 1: rejected by the SPRT (likelihood ratio above A); 2: the MSAC cost already
+    exceeds ``bail`` (the best cost so far), so H cannot win. With ``bail = A = inf``: the plain MSAC cost.
+    """
+    up = delta / eps
+    down = (1.0 - delta) / (1.0 - eps)
+    lam = 1.0
+    cost = 0.0
+    cnt = 0
+    n = src.shape[0]
+    for i in range(n):
+        e2 = _sq_error(H, src[i, 0], src[i, 1], dst[i, 0], dst[i, 1])
+        if e2 <= thr2:
+            cost += e2
+            cnt += 1
+            lam *= up
+        else:
+            cost += thr2
+            lam *= down
+            if lam > A:
+                return cost, cnt, i + 1, 1
+            if cost > bail:
+                return cost, cnt, i + 1, 2
+    return cost, cnt, n, 0
+
+
+@njit(cache=True, error_model="numpy")
+def _hartley(p, mask):
+    """Hartley normalization of the points ``p[mask]``: (count, centroid x, centroid y, scale).
+
+    The scale sqrt(2) / mean distance to the centroid moves the mean distance to sqrt(2); it is ``inf`` when the
+    points coincide (callers test ``scale < inf``). The normalized point is ``((x - cx) * s, (y - cy) * s)``.
+    """
+    n = 0
+    cx = cy = 0.0
+    for i in range(p.shape[0]):
+        if mask[i]:
+            n += 1
+            cx += p[i, 0]
+            cy += p[i, 1]
+    cx /= n
+    cy /= n
+    d = 0.0
+    for i in range(p.shape[0]):
+        if mask[i]:
+            d += math.sqrt((p[i, 0] - cx) ** 2 + (p[i, 1] - cy) ** 2)
+    return n, cx, cy, math.sqrt(2.0) * n / d
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _denormalize(Hn, Ts, Tdi, tmp, out):
+    """``out = Tdi @ Hn @ Ts`` (``tmp``: 3x3 scratch): a model between normalized coordinates back in pixels (or,
+    given ``Tsi`` and ``Td``, a pixel model in normalized coordinates)."""
+    _matmul3(Hn, Ts, tmp)
+    _matmul3(Tdi, tmp, out)
+
+
+@njit(cache=True, error_model="numpy")
+def _normalize(p):
+    """Hartley normalization in one pass: (T (3, 3), normalized points (N, 2), not_collinear).
+
+    ``not_collinear`` is False when the smaller principal axis of the points is below ``_ALL_COLLINEAR_EPS`` times
+    the larger one (computed from the 2x2 covariance: ratio of eigenvalues <= eps^2), or all points coincide.
+    """
+    n, cx, cy, s = _hartley(p, np.ones(p.shape[0], np.bool_))
+    T = np.eye(3)
+    out = np.empty((n, 2))
+    if not s < np.inf:
+        return T, out, False
+    a = b = c = 0.0
+    for i in range(n):
+        x = (p[i, 0] - cx) * s
+        y = (p[i, 1] - cy) * s
+        out[i, 0] = x
+        out[i, 1] = y
+        a += x * x
+        b += x * y
+        c += y * y
+    T[0, 0] = s
+    T[1, 1] = s
+    T[0, 2] = -s * cx
+    T[1, 2] = -s * cy
+    l1 = 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
+    det = a * c - b * b
+    return T, out, det > (_ALL_COLLINEAR_EPS ** 2) * l1 * l1
+
+
+@njit(cache=True, error_model="numpy")
+def _jacobi_eigh(M, V):
+    """Eigen-decomposition of a small symmetric matrix by cyclic Jacobi rotations (M is overwritten).
+
+    Returns the eigenvalues in ascending order; the columns of ``V`` become the matching unit eigenvectors.
+    Plain loops rather than ``np.linalg.eigh`` keep numba's compile time short; for 9x9 this is a few microseconds.
+    """
+    n = M.shape[0]
+    for i in range(n):
+        for j in range(n):
+            V[i, j] = 1.0 if i == j else 0.0
+    for sweep in range(50):
+        off = 0.0
+        for p in range(n):
+            for q in range(p + 1, n):
+                off += M[p, q] * M[p, q]
+        diag = 0.0
+        for p in range(n):
+            diag += M[p, p] * M[p, p]
+        if off <= 1e-30 * diag or off == 0.0:
+            break
+        for p in range(n):
+            for q in range(p + 1, n):
+                apq = M[p, q]
+                if apq == 0.0:
+                    continue
+                theta = (M[q, q] - M[p, p]) / (2.0 * apq)
+                tt = (1.0 if theta >= 0 else -1.0) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+                c = 1.0 / math.sqrt(tt * tt + 1.0)
+                s = tt * c
+                for k in range(n):
+                    mkp = M[k, p]
+                    mkq = M[k, q]
+                    M[k, p] = c * mkp - s * mkq
+                    M[k, q] = s * mkp + c * mkq
+                for k in range(n):
+                    mpk = M[p, k]
+                    mqk = M[q, k]
+                    M[p, k] = c * mpk - s * mqk
+                    M[q, k] = s * mpk + c * mqk
+                for k in range(n):
+                    vkp = V[k, p]
+                    vkq = V[k, q]
+                    V[k, p] = c * vkp - s * vkq
+                    V[k, q] = s * vkp + c * vkq
+    w = np.empty(n)
+    for i in range(n):
+        w[i] = M[i, i]
+    order = np.argsort(w)
+    Vs = V.copy()
+    ws = np.empty(n)
+    for j in range(n):
+        ws[j] = w[order[j]]
+        for i in range(n):
+            V[i, j] = Vs[i, order[j]]
+    return ws
+
+
+@njit(cache=True, error_model="numpy")
+def _lm_cost(p, xs, ys, us, vs, ws):
+    """Weighted sum of squared one-sided reprojection errors of the 8-parameter homography p (H[2, 2] = 1)."""
+    H = np.empty((3, 3))
+    for k in range(8):
+        H[k // 3, k % 3] = p[k]
+    H[2, 2] = 1.0
+    c = 0.0
+    for i in range(xs.shape[0]):
+        e2 = _sq_error(H, xs[i], ys[i], us[i], vs[i])
+        if e2 == np.inf:
+            return np.inf
+        c += ws[i] * e2
+    return c
+
+
+@njit(cache=True, error_model="numpy")
+def _lsq(src, dst, mask):
+    """Hartley-normalized DLT on the masked correspondences via the 9x9 normal matrix; (H, ok)."""
+    H = np.zeros((3, 3))
+    n, cx, cy, ss = _hartley(src, mask)
+    if n < 4:
+        return H, False
+    _, cX, cY, sd = _hartley(dst, mask)
+    if not (ss < np.inf and sd < np.inf):
+        return H, False
+    # A^T A of the DLT rows [p, 0, -u p], [0, p, -v p] with p = (x, y, 1) has the block structure
+    # [[S, 0, -Su], [0, S, -Sv], [-Su, -Sv, Suv]] with S = sum p p^T, Su = sum u p p^T, Sv = sum v p p^T,
+    # Suv = sum (u^2 + v^2) p p^T: 24 sums per point instead of 162 products
+    S = np.zeros(6)
+    Su = np.zeros(6)
+    Sv = np.zeros(6)
+    Suv = np.zeros(6)
+    q = np.empty(6)
+    for i in range(src.shape[0]):
+        if not mask[i]:
+            continue
+        x = (src[i, 0] - cx) * ss
+        y = (src[i, 1] - cy) * ss
+        u = (dst[i, 0] - cX) * sd
+        v = (dst[i, 1] - cY) * sd
+        q[0] = x * x
+        q[1] = x * y
+        q[2] = x
+        q[3] = y * y
+        q[4] = y
+        q[5] = 1.0
+        r2 = u * u + v * v
+        for k in range(6):
+            S[k] += q[k]
+            Su[k] += u * q[k]
+            Sv[k] += v * q[k]
+            Suv[k] += r2 * q[k]
+    M = np.zeros((9, 9))
+    for a in range(3):
+        for b in range(3):
+            k = _SYM6[a, b]
+            M[a, b] = S[k]
+            M[3 + a, 3 + b] = S[k]
+            M[a, 6 + b] = -Su[k]
+            M[6 + a, b] = -Su[k]
+            M[3 + a, 6 + b] = -Sv[k]
+            M[6 + a, 3 + b] = -Sv[k]
+            M[6 + a, 6 + b] = Suv[k]
+    V = np.empty((9, 9))
+    w = _jacobi_eigh(M, V)
+    if not (w[1] > 1e-14 * w[8]):
+        return H, False
+    Hn = np.empty((3, 3))
+    for k in range(9):
+        Hn[k // 3, k % 3] = V[k, 0]
+    _denormalize(Hn, _similarity(ss, -ss * cx, -ss * cy), _similarity(1.0 / sd, cX, cY), np.empty((3, 3)), H)
+    if H[2, 2] != 0.0:
+        H /= H[2, 2]
+    return H, True
+
+
+@njit(cache=True, error_model="numpy")
+def _lm_refine(src, dst, weight, H0, max_iter):
+    """Levenberg-Marquardt on the weighted one-sided reprojection error sum_i weight_i * |dehom(H src_i) - dst_i|^2.
+
+    Correspondences with weight 0 are ignored. Works in Hartley-normalized coordinates (isotropic scaling of dst,
+    so the objective is the pixel one up to a constant) with 8 parameters (H[2, 2] = 1 there). Returns
+    (H in pixels, weighted sum of squared errors in pixels^2).
+    """
+    n_all = src.shape[0]
+    used = weight > 0.0
+    n, cx, cy, ss = _hartley(src, used)
+    _, cX, cY, sd = _hartley(dst, used)
+    xs = np.empty(n)
+    ys = np.empty(n)
+    us = np.empty(n)
+    vs = np.empty(n)
+    ws = np.empty(n)
+    j = 0
+    for i in range(n_all):
+        if weight[i] > 0.0:
+            xs[j] = (src[i, 0] - cx) * ss
+            ys[j] = (src[i, 1] - cy) * ss
+            us[j] = (dst[i, 0] - cX) * sd
+            vs[j] = (dst[i, 1] - cY) * sd
+            ws[j] = weight[i]
+            j += 1
+    Ts = _similarity(ss, -ss * cx, -ss * cy)
+    Tsi = _similarity(1.0 / ss, cx, cy)
+    Td = _similarity(sd, -sd * cX, -sd * cY)
+    Tdi = _similarity(1.0 / sd, cX, cY)
+    tmp = np.empty((3, 3))
+    Hn = np.empty((3, 3))
+    _denormalize(H0, Tsi, Td, tmp, Hn)
+    if abs(Hn[2, 2]) < 1e-12:
+        e = np.empty(n_all)
+        _sq_errors(src, dst, H0, e)
+        c = 0.0
+        for i in range(n_all):
+            if weight[i] > 0.0:
+                c += weight[i] * e[i]
+        return H0.copy(), c
+    Hn /= Hn[2, 2]
+    p = np.empty(8)
+    for k in range(8):
+        p[k] = Hn[k // 3, k % 3]
+
+    cost = _lm_cost(p, xs, ys, us, vs, ws)
+    lam = 1e-3
+    JtJ = np.zeros((8, 8))
+    Jtr = np.zeros(8)
+    J = np.zeros((2, 8))
+    A = np.zeros((8, 8))
+    negJtr = np.empty(8)
+    delta = np.empty(8)
+    rel = 0.0
+    for it in range(max_iter):
+        JtJ[:, :] = 0.0
+        Jtr[:] = 0.0
+        for i in range(n):
+            x = xs[i]
+            y = ys[i]
+            w = p[6] * x + p[7] * y + 1.0
+            iw = 1.0 / w
+            uu = (p[0] * x + p[1] * y + p[2]) * iw
+            vv = (p[3] * x + p[4] * y + p[5]) * iw
+            ru = uu - us[i]
+            rv = vv - vs[i]
+            J[0, 0] = x * iw
+            J[0, 1] = y * iw
+            J[0, 2] = iw
+            J[0, 3] = 0.0
+            J[0, 4] = 0.0
+            J[0, 5] = 0.0
+            J[0, 6] = -uu * x * iw
+            J[0, 7] = -uu * y * iw
+            J[1, 0] = 0.0
+            J[1, 1] = 0.0
+            J[1, 2] = 0.0
+            J[1, 3] = x * iw
+            J[1, 4] = y * iw
+            J[1, 5] = iw
+            J[1, 6] = -vv * x * iw
+            J[1, 7] = -vv * y * iw
+            wi = ws[i]
+            for a in range(8):
+                Jtr[a] += wi * (J[0, a] * ru + J[1, a] * rv)
+                for b in range(a, 8):
+                    JtJ[a, b] += wi * (J[0, a] * J[0, b] + J[1, a] * J[1, b])
+        for a in range(8):
+            for b in range(a):
+                JtJ[a, b] = JtJ[b, a]
+        improved = False
+        for attempt in range(10):
+            A[:, :] = JtJ
+            for a in range(8):
+                A[a, a] += lam * (JtJ[a, a] + 1e-12)
+            for a in range(8):
+                negJtr[a] = -Jtr[a]
+            if not cholesky_solve(A, negJtr, delta):
+                lam *= 10.0
+                continue
+            pn = p + delta
+            cn = _lm_cost(pn, xs, ys, us, vs, ws)
+            if cn < cost:
+                rel = (cost - cn) / max(cost, 1e-300)
+                p = pn
+                cost = cn
+                lam = max(lam * 0.1, 1e-12)
+                improved = True
+                break
+            lam *= 10.0
+        if not improved or rel < 1e-12:
+            break
+    for k in range(8):
+        Hn[k // 3, k % 3] = p[k]
+    Hn[2, 2] = 1.0
+    H = np.empty((3, 3))
+    _denormalize(Hn, Ts, Tdi, tmp, H)
+    if H[2, 2] != 0.0:
+        H /= H[2, 2]
+    return H, cost / (sd * sd)
+
+
+#: the final refinement's loss is Tukey's biweight; hard inliers and a Cauchy-like loss were measured and rejected
+#: (BENCHMARKS.md, "homography": the final refinement paragraph)
+@njit(cache=True, error_model="numpy")
+def _weights(e2, thr2, out):
+    """IRLS weights of the final refinement from squared residuals: Tukey's biweight (1 - e2 / c^2)^2 within
+    c^2 = ``thr2``, 0 beyond."""
+    for i in range(e2.shape[0]):
+        if e2[i] > thr2:
+            out[i] = 0.0
+        else:
+            r = 1.0 - e2[i] / thr2
+            out[i] = r * r
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def _finalize(src, dst, H0, thr2, refine, rounds, wthr2):
+    """Inliers of H0 and, with ``refine``, up to ``rounds`` of weighted Levenberg-Marquardt (Tukey weights cut
+    off at ``wthr2`` from the residuals of the previous round, see ``_weights``). Returns (H, inlier mask, squared
+    errors)."""
+    n = src.shape[0]
+    e2 = _sq_errors(src, dst, H0, np.empty(n))
+    mask = np.empty(n, np.bool_)
+    cnt = 0
+    for i in range(n):
+        mask[i] = e2[i] <= thr2
+        cnt += mask[i]
+    H = H0.copy()
+    if not refine or cnt < 4:
+        return H, mask, e2
+    w = np.empty(n)
+    e2r = np.empty(n)
+    for _ in range(rounds):
+        _weights(e2, wthr2, w)
+        used = 0
+        for i in range(n):
+            used += w[i] > 0.0
+        if used < 4:
+            break
+        Hr, _sse = _lm_refine(src, dst, w, H, 30)
+        finite = True
+        for i in range(3):
+            for j in range(3):
+                finite = finite and math.isfinite(Hr[i, j])
+        if not finite:
+            break
+        _sq_errors(src, dst, Hr, e2r)
+        cnt_r = 0
+        for i in range(n):
+            cnt_r += e2r[i] <= thr2
+        if cnt_r < 4:
+            break
+        H = Hr
+        for i in range(n):
+            e2[i] = e2r[i]
+            mask[i] = e2r[i] <= thr2
+    return H, mask, e2
+
+
+@njit(cache=True)
+def _chance_hits(src, dst, H, thr2, rows):  # pragma: no cover - compiled
+    """Pairs (i, j), i in ``rows``, j != i, with ``|| dehom(H src_i) - dst_j ||^2 <= thr2``."""
+    hits = 0
+    for i in rows:
+        x, y = src[i, 0], src[i, 1]
+        w = H[2, 0] * x + H[2, 1] * y + H[2, 2]
+        if not abs(w) > 1e-12:
+            continue
+        u = (H[0, 0] * x + H[0, 1] * y + H[0, 2]) / w
+        v = (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w
+        for j in range(dst.shape[0]):
+            if j != i:
+                du = u - dst[j, 0]
+                dv = v - dst[j, 1]
+                if du * du + dv * dv <= thr2:
+                    hits += 1
+    return hits

@@ -1,0 +1,43 @@
+"""Hough line detection, one module per step.
+
+- :mod:`~cvpipe.hough.edges`: Canny edge maps (``canny_edges``);
+- :mod:`~cvpipe.hough.transform`: the standard transform with ``cv2.HoughLines`` semantics (``hough_lines``,
+  ``hough_grid``, ``hough_accumulator``) and OpenCV's as the baseline (``hough_lines_opencv``, ``IMPLEMENTATIONS``);
+- :mod:`~cvpipe.hough.probabilistic`: our progressive probabilistic transform (``hough_lines_probabilistic``);
+- :mod:`~cvpipe.hough.evaluate`: agreement with OpenCV and with ground truth (``cell_agreement``, ``compare_runs``);
+- :mod:`~cvpipe.hough.report`: pictures and the report page (``draw_lines``, ``report_summary``);
+- :mod:`~cvpipe.hough._kernels`: the numba kernels, imported only when a transform of ours runs, so that importing
+  this package (or ``cvpipe hough --method opencv``) does not import numba.
+"""
+
+from .edges import canny_edges
+from .evaluate import (cell_agreement, compare_runs, line_cells, line_segment_matches, median_seconds, metrics_of,
+                       segment_segment_matches, truth_matches)
+from .probabilistic import hough_lines_probabilistic
+from .report import draw_lines, draw_segments, quality_plot, report_summary
+from .transform import (IMPLEMENTATIONS, HoughGrid, get_impl, hough_accumulator, hough_grid, hough_lines,
+                        hough_lines_opencv)
+
+__all__ = [
+    "HoughGrid",
+    "hough_grid",
+    "hough_accumulator",
+    "hough_lines",
+    "hough_lines_opencv",
+    "IMPLEMENTATIONS",
+    "get_impl",
+    "hough_lines_probabilistic",
+    "canny_edges",
+    "line_cells",
+    "cell_agreement",
+    "line_segment_matches",
+    "segment_segment_matches",
+    "truth_matches",
+    "compare_runs",
+    "metrics_of",
+    "median_seconds",
+    "draw_lines",
+    "draw_segments",
+    "report_summary",
+    "quality_plot",
+]

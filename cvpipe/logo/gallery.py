@@ -1,0 +1,179 @@
+"""The gallery: one index over the descriptors of every reference image of every brand, built once."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import cv2
+import numpy as np
+
+from ..errors import InputError
+from ..features import DETECTORS, Features, check_detector
+from ..geometry import image_corners
+from ..matching import flann_matcher
+
+
+@dataclass(frozen=True)
+class Reference:
+    """One gallery image of a brand.
+
+    Attributes
+    ----------
+    brand : str
+        Brand name (the gallery file or folder name).
+    name : str
+        Where the image came from (file name), used in messages.
+    features : Features
+        Its keypoints and descriptors (positions in reference pixels).
+    size : tuple of int
+        (width, height) of the reference image in pixels.
+    box : tuple of float, optional
+        ``(x1, y1, x2, y2)`` corner pixel centres of the logo inside the reference image, when the reference is a
+        whole photo with the logo boxed (features then come from inside the box, detected with the photo around
+        it so that descriptors near the box edge see real context). Default: the whole image.
+    """
+
+    brand: str
+    name: str
+    features: Features
+    size: tuple[int, int]
+    box: tuple[float, float, float, float] | None = None
+
+    @property
+    def outline(self) -> np.ndarray:
+        """(4, 2) logo outline in reference pixels, clockwise from the top-left."""
+        if self.box is None:
+            return image_corners(*self.size)
+        x1, y1, x2, y2 = self.box
+        return np.array([[x1, y1], [x2, y1], [x2, y2], [x1, y2]], np.float64)
+
+    @property
+    def area(self) -> float:
+        """Area of the logo outline, px^2."""
+        q = self.outline
+        return float((q[1, 0] - q[0, 0]) * (q[2, 1] - q[1, 1]))
+
+
+@dataclass(frozen=True, eq=False)
+class Gallery:
+    """The indexed gallery: stacked descriptors of every usable reference and a matcher trained on them.
+
+    Attributes
+    ----------
+    detector : str
+        Detector of every reference (scenes must use the same one).
+    brands : tuple of str
+        Sorted brand names.
+    references : tuple of Reference
+        Usable references (at least ``min_features`` keypoints).
+    dropped : tuple of str
+        Names of references left out for having too few keypoints.
+    ref_of : (M,) int64
+        Reference index of every stacked descriptor.
+    local_of : (M,) int64
+        Keypoint index inside its reference of every stacked descriptor.
+    brand_of_ref : (R,) int64
+        Index into ``brands`` of every reference.
+    """
+
+    detector: str
+    brands: tuple[str, ...]
+    references: tuple[Reference, ...]
+    dropped: tuple[str, ...]
+    ref_of: np.ndarray
+    local_of: np.ndarray
+    brand_of_ref: np.ndarray
+    matcher: cv2.DescriptorMatcher = field(repr=False)
+
+    @property
+    def binary(self) -> bool:
+        return DETECTORS[self.detector][1]
+
+
+def _prepare(desc: np.ndarray, binary: bool) -> np.ndarray:
+    """RootSIFT for float descriptors (L1 normalise, square root): Hellinger instead of Euclidean distance, which
+    matches SIFT histograms better; binary descriptors pass through."""
+    if binary:
+        return np.ascontiguousarray(desc, np.uint8)
+    d = np.asarray(desc, np.float32)
+    d = d / (np.abs(d).sum(axis=1, keepdims=True) + 1e-7)
+    return np.ascontiguousarray(np.sqrt(np.maximum(d, 0)), np.float32)
+
+
+def _strongest(f: Features, n: int) -> Features:
+    """The ``n`` keypoints of highest detector response."""
+    keep = np.sort(np.argsort(-np.asarray(f.response), kind="stable")[:n])
+    return Features(f.xy[keep], f.size[keep], f.angle[keep], f.response[keep], f.descriptors[keep], f.detector)
+
+
+def build_gallery(references: Sequence[Reference], min_features: int = 8,
+                  max_features: int | None = None) -> Gallery:
+    """Index the references of every brand once.
+
+    Parameters
+    ----------
+    references : sequence of Reference
+        At least one; all from the same detector.
+    min_features : int
+        References with fewer keypoints are dropped (listed in ``Gallery.dropped``): they cannot support a
+        verified homography.
+    max_features : int, optional
+        Keep at most this many keypoints per reference, the strongest by detector response. The binary detectors
+        find up to 4000 keypoints inside one boxed logo, and the brute-force Hamming search costs in proportion to
+        the stacked total. Default: keep all.
+
+    Raises
+    ------
+    InputError
+        Empty gallery, or no reference with at least ``min_features`` keypoints (the message names the files).
+    ValueError
+        Mixed detectors or a bad ``min_features`` / ``max_features``.
+    """
+    if not isinstance(min_features, (int, np.integer)) or min_features < 4:
+        raise ValueError(f"`min_features` must be an integer >= 4, got {min_features!r}")
+    refs = list(references)
+    if not refs:
+        raise InputError("the gallery is empty: expected DIR/<brand>.<ext> or DIR/<brand>/*.<ext> images")
+    detectors = sorted({r.features.detector for r in refs})
+    if len(detectors) > 1:
+        raise ValueError(f"gallery references must share one detector, got {detectors}")
+    detector = detectors[0]
+    check_detector(detector)
+    for r in refs:
+        if len(r.size) != 2 or min(r.size) < 1:
+            raise ValueError(f"`size` of reference {r.name} must be (width, height) >= 1, got {r.size}")
+        if r.box is not None:
+            x1, y1, x2, y2 = r.box
+            if not (0 <= x1 < x2 <= r.size[0] - 1 and 0 <= y1 < y2 <= r.size[1] - 1):
+                raise ValueError(f"`box` of reference {r.name} must lie inside its {r.size[0]}x{r.size[1]} image "
+                                 f"with x1 < x2 and y1 < y2, got {r.box}")
+    if max_features is not None:
+        if not isinstance(max_features, (int, np.integer)) or max_features < min_features:
+            raise ValueError(f"`max_features` must be an integer >= `min_features` ({min_features}), got "
+                             f"{max_features!r}")
+        refs = [r if len(r.features) <= max_features else
+                Reference(r.brand, r.name, _strongest(r.features, int(max_features)), r.size, r.box) for r in refs]
+    usable = [r for r in refs if len(r.features) >= min_features]
+    dropped = tuple(r.name for r in refs if len(r.features) < min_features)
+    if not usable:
+        names = ", ".join(f"{r.name} ({len(r.features)})" for r in refs)
+        raise InputError(f"no gallery image yields at least {min_features} keypoints with {detector}: {names}")
+    brands = tuple(sorted({r.brand for r in usable}))
+    binary = DETECTORS[detector][1]
+    desc = np.concatenate([_prepare(r.features.descriptors, binary) for r in usable])
+    ref_of = np.concatenate([np.full(len(r.features), i, np.int64) for i, r in enumerate(usable)])
+    local_of = np.concatenate([np.arange(len(r.features), dtype=np.int64) for r in usable])
+    if binary:
+        matcher = cv2.BFMatcher(cv2.NORM_HAMMING)
+    else:
+        matcher = flann_matcher()
+    matcher.add([desc])
+    # FLANN's randomised kd-trees draw from OpenCV's global generator: seeding it here makes the index (and so every
+    # answer) a function of the gallery alone, not of whatever ran before in the process (this resets cv2's RNG)
+    cv2.setRNGSeed(0)
+    matcher.train()
+    brand_of_ref = np.array([brands.index(r.brand) for r in usable], np.int64)
+    # mapping the references of one brand into a shared frame and verifying them as one model was measured and
+    # rejected (no gain on FlickrLogos: BENCHMARKS.md, logo); every reference is verified on its own
+    return Gallery(detector, brands, tuple(usable), dropped, ref_of, local_of, brand_of_ref, matcher)
