@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Sequence, TypeVar
 
 from cvpipe import io
-from cvpipe.errors import CvpipeError, EstimationError
+from cvpipe.errors import CvpipeError, EstimationError, InputError
 from cvpipe.params import SECTIONS, load_section
 
 T = TypeVar("T")
@@ -141,6 +141,30 @@ class Stage:
     def drop(self, item: str, reason: str) -> None:
         """Record that ``item`` (a file, pair, set or probe name) was not processed, and why."""
         self.dropped.append({"item": str(item), "reason": str(reason)})
+
+    def finish(self, out: str | Path, count: int, what: str, nothing: str) -> None:
+        """Record ``dropped.json`` in the output folder ``out`` and the summary phrase ``"<count> <what>"``; with
+        nothing made at all, fail with the one line ``nothing`` (InputError: the inputs were unusable)."""
+        io.save_json(Path(out) / "dropped.json", self.dropped)
+        if not count:
+            raise InputError(nothing)
+        self.made(f"{count} {what}")
+
+    def write_report(self, summary: dict, metrics: dict | None = None, plots: dict[str, list] | None = None,
+                     dropped: Iterable[dict] = ()) -> None:
+        """A report stage's standard outputs: the page summary (``--summary``), the git-tracked metrics
+        (``--metrics``), the ``dvc plots`` rows (``--plots``/<name>.json); what earlier stages dropped is carried."""
+        io.save_json(self.args.summary, summary)
+        if metrics is not None:
+            io.save_json(self.args.metrics, metrics)
+        for name, rows in (plots or {}).items():
+            io.save_json(Path(self.args.plots) / f"{name}.json", rows)
+        self.carry(dropped)
+
+    def carry(self, dropped: Iterable[dict]) -> None:
+        """Repeat what an earlier stage dropped (``{"item", "reason"}`` records) in this stage's summary line."""
+        for d in dropped:
+            self.drop(d["item"], d["reason"])
 
     def made(self, what: str) -> None:
         """Add a phrase to the stage's summary line (``"12 edge maps"``)."""

@@ -5,7 +5,7 @@ subfolders of two images (truth.json optional). Pairs that cannot be matched are
 from pathlib import Path
 
 from cvpipe import datasets, io, matching
-from cvpipe.errors import CvpipeError, InputError
+from cvpipe.errors import CvpipeError
 from cvpipe.features import Features
 from stages._runner import Stage, run
 
@@ -36,10 +36,7 @@ def homography_match(st: Stage) -> None:
         io.save_npz(out / f"{pair.name}.npz", index=idx, src=A.xy[idx[:, 0]], dst=B.xy[idx[:, 1]],
                     size_a=fa["image_size"], size_b=fb["image_size"])
         made += 1
-    io.save_json(out / "dropped.json", st.dropped)
-    if not made:
-        raise InputError(f"{root}: no pair could be matched")
-    st.made(f"{made} pairs matched in {out}")
+    st.finish(out, made, f"pairs matched in {out}", f"{root}: no pair could be matched")
 
 
 if __name__ == "__main__":

@@ -32,14 +32,10 @@ def homography_report(st: Stage) -> None:
         path = out / f"{q.name}.png"
         io.save_image(path, homography.alignment_panel(img_a, img_b, panels, p.checker_tiles))
         pictures.append({"path": path.as_posix(), "caption": caption})
-    io.save_json(a.metrics, homography.metrics_of(compared))
-    io.save_json(a.summary, homography.report_summary(compared, pictures, dropped))
-    for name, rows in homography.quality_plots(compared).items():
-        io.save_json(Path(a.plots) / f"{name}.json", rows)
+    st.write_report(homography.report_summary(compared, pictures, dropped), homography.metrics_of(compared),
+                    homography.quality_plots(compared), dropped)
     st.made(f"{compared['pairs']} pairs compared ({compared['truth_pairs']} with ground truth), "
             f"{len(pictures)} pictures in {out}")
-    for d in dropped:
-        st.drop(d["item"], d["reason"])
 
 
 if __name__ == "__main__":

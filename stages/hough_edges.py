@@ -22,10 +22,7 @@ def hough_edges(st: Stage) -> None:
                                   blur_sigma=p.blur_sigma)
         io.save_image(out / f"{it.name}.png", edges)
         made += 1
-    io.save_json(out / "dropped.json", st.dropped)
-    if not made:
-        raise InputError(f"{st.args.images}: no readable image")
-    st.made(f"{made} edge maps in {out}")
+    st.finish(out, made, f"edge maps in {out}", f"{st.args.images}: no readable image")
 
 
 if __name__ == "__main__":

@@ -33,13 +33,10 @@ def hough_report(st: Stage) -> None:
         io.save_image(path, np.hstack([left, right]))
         pictures.append({"path": path.as_posix(), "caption": f"{it.name}: ours (red, left), OpenCV (green, right)"})
     dropped = io.load_json(Path(a.edges) / "dropped.json")
-    io.save_json(a.metrics, hough.metrics_of(compared))
-    io.save_json(a.summary, hough.report_summary(compared, ours, opencv, pictures[:MAX_PICTURES], dropped))
-    io.save_json(Path(a.plots) / "lines.json", hough.quality_plot(compared))
+    st.write_report(hough.report_summary(compared, ours, opencv, pictures[:MAX_PICTURES], dropped),
+                    hough.metrics_of(compared), {"lines": hough.quality_plot(compared)}, dropped)
     st.made(f"{compared['images']} images compared ({compared['identical_images']} identical, "
             f"{compared['truth_images']} with ground truth), {len(pictures)} overlays")
-    for d in dropped:
-        st.drop(d["item"], d["reason"])
 
 
 if __name__ == "__main__":

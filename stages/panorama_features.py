@@ -52,10 +52,7 @@ def panorama_features(st: Stage) -> None:
             io.save_npz(out / s.name / f"{f.stem}.npz", **ft.to_arrays(), work_size=size,
                         full_size=(img.shape[1], img.shape[0]), image_file=f.name)
         done += 1
-    io.save_json(out / "dropped.json", st.dropped)
-    if not done:
-        raise InputError(f"{st.args.images}: no panorama set with 2 or more usable images")
-    st.made(f"features of {done} sets in {out}")
+    st.finish(out, done, f"sets' features in {out}", f"{st.args.images}: no panorama set with 2 or more usable images")
 
 
 if __name__ == "__main__":
