@@ -650,3 +650,33 @@ SECTIONS.update({
     "stereo.rectify": StereoRectifyParams,
     "stereo.depth": StereoDepthParams,
 })
+
+
+# ---- compute (where per-item work runs; never a parameter of a DVC stage: it does not change any result) ----
+
+
+class ComputeParams(Section):
+    """``compute``: where stages run their items (:func:`cvpipe.compute.map_items`).
+
+    ``scheduler`` is ``""`` (in process), ``"local"`` (a Dask LocalCluster of ``workers`` single-threaded processes,
+    0 = one per core) or a Dask scheduler address (``tcp://host:8786``). ``window`` bounds the items in flight
+    (0 = 4 x the cluster's threads).
+    """
+
+    scheduler: str = ""
+    workers: int = Field(0, ge=0, le=4096)
+    window: int = Field(0, ge=0, le=1_000_000)
+
+    @field_validator("scheduler")
+    @classmethod
+    def _address(cls, value: str) -> str:
+        """The accepted forms of :func:`cvpipe.compute.check_scheduler` (not imported: params stays light)."""
+        s = value.strip()
+        if s in ("", "local") or ("://" in s and s.split("://", 1)[1]):
+            return s
+        raise PydanticCustomError("scheduler", "must be '' (in process), 'local' or a scheduler address like "
+                                               "tcp://host:8786")
+
+
+# not listed in any stage's ``params:`` in dvc.yaml: changing it never reruns a stage
+SECTIONS["compute"] = ComputeParams

@@ -38,6 +38,8 @@ T = TypeVar("T")
 
 #: where the uncached timing files go (relative to the repository root, where DVC runs every stage)
 TIMINGS_DIR = Path("outputs/timings")
+#: overrides ``compute.scheduler`` of the params file for the stages that fan out (:meth:`Stage.map`)
+SCHEDULER_ENV = "CVPIPE_COMPUTE_SCHEDULER"
 
 
 @dataclass
@@ -55,6 +57,86 @@ class Stage:
     def progress(self, items: Iterable[T], desc: str | None = None, total: int | None = None) -> Iterable[T]:
         """``items`` with a progress bar on stderr (only when stderr is a terminal, so DVC logs stay clean)."""
         return io.progress(items, desc or self.name, total=total)
+
+    def map(self, fn: Callable[[Any, Any], Any], items: Iterable, shared: Any = None, desc: str | None = None, *,
+            names: Sequence[str] | None = None, total: int | None = None) -> Iterator[tuple[str, Any]]:
+        """Run ``fn(item, shared)`` over ``items`` where ``compute`` in the params file says, in input order.
+
+        ``compute`` (:class:`cvpipe.params.ComputeParams`; absent = in process; the environment variable
+        ``CVPIPE_COMPUTE_SCHEDULER``, when set, overrides ``compute.scheduler``) is read here, never declared as a
+        stage parameter: it changes where the items run, never what they give, so the stage's outputs are the
+        same bytes whatever runs them (the caller writes them in the order yielded).
+
+        Parameters
+        ----------
+        fn : callable
+            A module-level function of the library (workers import it by reference) taking the item's data, not
+            a path: a worker need not see this working directory.
+        items : iterable
+            The items' data, consumed lazily (only a window of them is in memory on a cluster). An item that is
+            an exception instance (its data could not be read) is not run: it is dropped with its message.
+        shared : object, optional
+            Data every item needs (a reference and its features): sent once per worker.
+        desc : str, optional
+            The progress bar's label (default: the stage name).
+        names : sequence of str, optional
+            The items' names for :meth:`drop` (default: their positions).
+        total : int, optional
+            The number of items for the progress (default ``len(names)`` or ``len(items)``).
+
+        Yields
+        ------
+        (name, value)
+            For every item that succeeded, in input order. A failed item (a :class:`~cvpipe.errors.CvpipeError`)
+            becomes ``drop(name, reason)``, in input order too; any other exception ends the stage as it would in
+            a plain loop.
+        """
+        from cvpipe.compute import map_items, raise_unexpected
+
+        if total is None:
+            total = len(names) if names is not None else (len(items) if hasattr(items, "__len__") else None)
+        c = load_section(SECTIONS["compute"], "compute", self.args.params) if _has_compute(self.args.params) \
+            else SECTIONS["compute"]()
+        scheduler = c.scheduler
+        if os.environ.get(SCHEDULER_ENV, "").strip():
+            # one run on a cluster without editing params.yaml (`CVPIPE_COMPUTE_SCHEDULER=tcp://head:8786 dvc repro`)
+            from cvpipe.compute import check_scheduler
+
+            scheduler = check_scheduler(os.environ[SCHEDULER_ENV], SCHEDULER_ENV)
+        kept: list[int] = []  # input position of each item submitted
+        unread: dict[int, str] = {}  # input position -> why its data could not be read
+
+        def feed() -> Iterator[Any]:
+            for pos, data in enumerate(items):
+                if isinstance(data, BaseException):
+                    unread[pos] = str(data)
+                    continue
+                kept.append(pos)
+                yield data
+
+        def name(pos: int) -> str:
+            return str(names[pos]) if names is not None else str(pos)
+
+        flushed = 0  # the drops are recorded in input order, whatever the mode, so the outputs match byte for byte
+
+        def flush(upto: int) -> None:
+            nonlocal flushed
+            for pos in range(flushed, upto):
+                if pos in unread:
+                    self.drop(name(pos), unread.pop(pos))
+            flushed = max(flushed, upto)
+
+        for res in map_items(fn, feed(), scheduler=scheduler, workers=c.workers or None,
+                             window=c.window or None, shared=shared, progress=desc or self.name, total=total):
+            pos = kept[res.index]
+            flush(pos)
+            flushed = pos + 1
+            if res.ok:
+                yield name(pos), res.value
+            else:
+                raise_unexpected(res)
+                self.drop(name(pos), res.error)
+        flush(max(unread, default=-1) + 1)
 
     def drop(self, item: str, reason: str) -> None:
         """Record that ``item`` (a file, pair, set or probe name) was not processed, and why."""
@@ -104,6 +186,14 @@ class Stage:
             items = ", ".join(f"{d['item']} ({d['reason']})" for d in self.dropped)
             line += f"; dropped {len(self.dropped)}: {items}"
         return line
+
+
+def _has_compute(path: str) -> bool:
+    """Whether the params file has a ``compute`` section (without one, items run in process)."""
+    from cvpipe.params import read_params_file
+
+    node = read_params_file(path)
+    return isinstance(node, dict) and "compute" in node
 
 
 def _parser(doc: str, args: dict[str, str], options: dict[str, dict]) -> argparse.ArgumentParser:

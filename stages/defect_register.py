@@ -23,30 +23,30 @@ def defect_register(st: Stage) -> None:
     ref = io.read_image(inputs.reference, "gray")
     ref_feats = Features.from_arrays(io.load_npz(Path(a.features) / f"{inputs.reference.stem}.npz"))
     records = {}
-    for probe in st.progress([q for q in inputs.probes if q.name in matched["matches"]], "defect register"):
-        try:
-            prb = io.read_image(probe.path, "gray")
-            feats = Features.from_arrays(io.load_npz(Path(a.features) / "probes" / f"{probe.name}.npz"))
-            with st.timer("register"):
-                reg = defect.register_probe(ref, prb, p, reference_features=ref_feats, probe_features=feats,
-                                            matches=io.load_npz(Path(a.matches) / f"{probe.name}.npz")["index"])
-        except CvpipeError as exc:
-            st.drop(probe.path.name, str(exc))
-            continue
-        rec = {"file": probe.path.name, "probe_shape": prb.shape, "primary": asdict(reg), "alternative": None}
-        warped, valid = defect.warp_probe(prb, reg.H, ref.shape)
-        arrays = {"H": reg.H, "warped": warped, "valid": valid}
-        if defect.wants_alternative(reg, p):
+    probes = [q for q in inputs.probes if q.name in matched["matches"]]
+
+    def probe_data():
+        # read here, lazily: each probe's image, features and matches travel with its task (a worker need not see
+        # this folder); a probe that cannot be read is dropped with the reason, in input order
+        for probe in probes:
             try:
-                with st.timer("direct_alternative"):
-                    alt = defect.register_direct(ref, prb, p, matches=reg.matches, inliers=reg.inliers)
-            except EstimationError as exc:
-                rec["alternative_error"] = str(exc)
-            else:
-                rec["alternative"] = asdict(alt)
-                warped, valid = defect.warp_probe(prb, alt.H, ref.shape)
-                arrays.update(alt_H=alt.H, alt_warped=warped, alt_valid=valid)
-        io.save_npz(out / f"{probe.name}.npz", probe_shape=prb.shape, **arrays)
+                yield (io.read_image(probe.path, "gray"),
+                       Features.from_arrays(io.load_npz(Path(a.features) / "probes" / f"{probe.name}.npz")),
+                       io.load_npz(Path(a.matches) / f"{probe.name}.npz")["index"])
+            except CvpipeError as exc:
+                yield exc
+
+    by_name = {q.path.name: q for q in probes}
+    for name, r in st.map(defect.register_item, probe_data(), shared=(ref, ref_feats, p), desc="defect register",
+                          names=list(by_name)):
+        probe = by_name[name]
+        for key, sec in r["seconds"].items():
+            st.timings[key] = st.timings.get(key, 0.0) + sec
+        rec = {"file": probe.path.name, "probe_shape": r["probe_shape"], "primary": asdict(r["primary"]),
+               "alternative": None if r["alternative"] is None else asdict(r["alternative"])}
+        if r["alternative_error"] is not None:
+            rec["alternative_error"] = r["alternative_error"]
+        io.save_npz(out / f"{probe.name}.npz", probe_shape=r["probe_shape"], **r["arrays"])
         records[probe.name] = rec
     if not records:
         raise EstimationError(f"no probe could be registered to {inputs.reference}: "

@@ -16,6 +16,7 @@ BENCHMARKS = {
     "stereo": "stereo",
     "panorama": "panorama",
     "pipeline": "pipeline",
+    "scale": "scale",
 }
 
 

@@ -1,12 +1,13 @@
-"""``cvpipe hough IMAGE``: straight lines of an image (our Hough transform or OpenCV's, same parameters)."""
+"""``cvpipe hough IMAGE...``: straight lines of images (our Hough transform or OpenCV's, same parameters)."""
 
 from __future__ import annotations
 
 import argparse
 import math
+import sys
 
 from ..params import HoughEdgesParams, HoughLinesParams
-from . import compile_note, note, step
+from . import compile_note, note, overlay_paths, progress, step
 
 HELP = "find straight lines (standard Hough transform, cv2.HoughLines conventions)"
 EXAMPLE = "cvpipe hough data/samples/hough/synthetic_grid.png --threshold 100 --max-lines 10 --overlay lines.png"
@@ -19,7 +20,8 @@ DEFAULT_MAX_LINES = 50
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     e, p = HoughEdgesParams(), HoughLinesParams()
-    parser.add_argument("image", help="input image (converted to grayscale)")
+    parser.add_argument("image", nargs="+", help="input image(s) (converted to grayscale); with several, --json "
+                                                 'prints a list of records, each with its "image"')
     parser.add_argument("--method", choices=METHODS, default=None,
                         help="our transform or cv2.HoughLines (default: ours)")
     parser.add_argument("--impl", choices=METHODS, default=None, help=argparse.SUPPRESS)  # deprecated spelling
@@ -33,10 +35,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-lines", type=int, default=DEFAULT_MAX_LINES, metavar="K",
                         help=f"report the K lines with most votes, 0 = all (default {DEFAULT_MAX_LINES})")
     parser.add_argument("--refine", action="store_true", help="sub-bin (rho, theta) for --method ours")
-    parser.add_argument("--overlay", metavar="PNG", help="write the image with the reported lines drawn on it")
+    parser.add_argument("--overlay", metavar="PNG", help="write the image with the reported lines drawn on it; with "
+                                                         "several images PNG is a folder (<image>_lines.png)")
     parser.add_argument("--json", action="store_true",
                         help='print {"lines": [[rho, theta_rad, votes], ...] (cv2 convention), '
                              '"lines_deg": [{"rho_px", "theta_deg", "votes"}, ...], "total", "overlay"}')
+    parser.add_argument("--scheduler", default="", metavar="ADDR",
+                        help="run the images on Dask: 'local' or a scheduler address tcp://host:port "
+                             "(default: in process)")
 
 
 def method_of(args: argparse.Namespace) -> str:
@@ -48,8 +54,48 @@ def method_of(args: argparse.Namespace) -> str:
     return args.method or args.impl or "ours"
 
 
+def _read_images(paths: list[str]):
+    """``(gray image or None, read error or None)`` per path, lazily: the image travels with its task and a read
+    error fails only its own item."""
+    from .. import io
+    from ..errors import CvpipeError
+
+    for path in paths:
+        try:
+            yield io.read_image(path, "gray"), None
+        except CvpipeError as exc:
+            yield None, exc
+
+
+def image_lines(item: tuple, shared: tuple):
+    """The (N, 3) lines of one image, an item of :func:`cvpipe.compute.map_items` (runs on a worker).
+
+    Parameters
+    ----------
+    item : tuple
+        ``(gray image or None, read error or None)`` from :func:`_read_images`.
+    shared : tuple
+        ``(HoughEdgesParams, (canny low, high), method, rho, theta in radians, threshold, keyword arguments)``.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``(rho, theta, votes)`` rows, most votes first (``cvpipe.hough`` conventions).
+    """
+    from .. import hough
+
+    gray, error = item
+    if error is not None:
+        raise error
+    e, canny, method, rho, theta, threshold, kwargs = shared
+    edges = hough.canny_edges(gray, canny[0], canny[1], aperture=e.aperture, l2_gradient=e.l2_gradient,
+                              blur_sigma=e.blur_sigma)
+    return hough.get_impl(method)(edges, rho, theta, threshold, **kwargs)
+
+
 def run(args: argparse.Namespace) -> int:
     from .. import hough, io
+    from ..compute import check_scheduler, item_error, map_items, raise_unexpected
     from ..errors import InputError
 
     method = method_of(args)
@@ -65,34 +111,57 @@ def run(args: argparse.Namespace) -> int:
 
         vote = _kernels._vote_parallel if transform._use_parallel(None) else _kernels._vote_serial
         compile_note("hough", (_kernels, [_kernels._edge_points, vote, _kernels._peaks]))
-    e = HoughEdgesParams()
-    with step("read"):
-        gray = io.read_image(args.image, "gray")
-    with step("edges"):
-        edges = hough.canny_edges(gray, args.canny[0], args.canny[1], aperture=e.aperture, l2_gradient=e.l2_gradient,
-                                  blur_sigma=e.blur_sigma)
+    scheduler = check_scheduler(args.scheduler, "--scheduler")
     kwargs = {"refine": True} if args.refine else {}
+    shared = (HoughEdgesParams(), tuple(args.canny), method, args.rho, math.radians(args.theta_deg), args.threshold,
+              kwargs)
+    pictures = overlay_paths(args.image, args.overlay, "_lines")
     with step(f"lines ({method})"):
-        lines = hough.get_impl(method)(edges, args.rho, math.radians(args.theta_deg), args.threshold, **kwargs)
-    total = len(lines)
-    if args.max_lines:
-        lines = lines[: args.max_lines]
-    result = {"lines": lines.tolist(), "total": total,
-              "lines_deg": [{"rho_px": float(r), "theta_deg": round(math.degrees(t), 6), "votes": int(v)}
-                            for r, t, v in lines]}
-    if args.overlay:
-        with step("overlay"):
-            io.save_image(args.overlay, hough.draw_lines(io.read_image(args.image, "color"), lines, thickness=2))
-        result["overlay"] = args.overlay
+        results = list(progress(map_items(image_lines, _read_images(args.image), shared=shared, scheduler=scheduler,
+                                          total=len(args.image)), "hough", total=len(args.image)))
+    records, errors = [], []
+    for path, res, picture in zip(args.image, results, pictures):
+        if not res.ok:
+            raise_unexpected(res)  # a bug or an interrupt ends the command, as in a plain loop
+            exc = item_error(res, file=path)
+            errors.append(exc)
+            msg = res.error if str(path) in res.error else f"{path}: {res.error}"
+            records.append({"image": path, "lines": None, "error": msg})
+            continue
+        lines = res.value
+        total = len(lines)
+        if args.max_lines:
+            lines = lines[: args.max_lines]
+        result = {"image": path, "lines": lines.tolist(), "total": total,
+                  "lines_deg": [{"rho_px": float(r), "theta_deg": round(math.degrees(t), 6), "votes": int(v)}
+                                for r, t, v in lines]}
+        if picture:
+            with step("overlay"):
+                io.save_image(picture, hough.draw_lines(io.read_image(path, "color"), lines, thickness=2))
+            result["overlay"] = picture
+        records.append(result)
+    if len(args.image) == 1:
+        if errors:  # one image: its failure is the one-line error, with the exit status of its kind
+            raise type(errors[0])(records[0]["error"], file=errors[0].file)
+        del records[0]["image"]  # the single-image record is unchanged: {"lines", "total", "lines_deg", "overlay"}
+    for rec in records:
+        if "error" in rec:
+            print(f"cvpipe: error: {rec['error']}", file=sys.stderr)
     if args.json:
-        print(io.dumps_json(result))
-    else:
+        print(io.dumps_json(records if len(args.image) > 1 else records[0]))
+        return max((e.exit_code for e in errors), default=0)
+    for path, rec in zip(args.image, records):
+        if "error" in rec:
+            print(f"{path}: error")
+            continue
+        lines, total = rec["lines"], rec["total"]
         shown = f"{len(lines)} of {total}" if len(lines) < total else f"{total}"
-        print(f"{shown} lines ({method}); rho [px], theta [deg], votes:")
-        for d in result["lines_deg"]:
+        head = f"{path}: " if len(args.image) > 1 else ""
+        print(f"{head}{shown} lines ({method}); rho [px], theta [deg], votes:")
+        for d in rec["lines_deg"]:
             print(f"{d['rho_px']:9.2f} {d['theta_deg']:8.3f} {d['votes']:6d}")
         if len(lines) < total:
             print(f"(--max-lines {args.max_lines}: {total - len(lines)} weaker lines not shown; --max-lines 0 for all)")
-        if args.overlay:
-            print(f"overlay: {args.overlay}")
-    return 0
+        if "overlay" in rec:
+            print(f"overlay: {rec['overlay']}")
+    return max((e.exit_code for e in errors), default=0)

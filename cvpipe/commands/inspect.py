@@ -45,6 +45,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ecc-levels", type=int, default=_DEFAULTS.register.ecc_levels,
                         help=f"pyramid levels of the ECC refinement (default {_DEFAULTS.register.ecc_levels})")
     parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
+    parser.add_argument("--scheduler", default="", metavar="ADDR",
+                        help="run the probes on Dask: 'local' or a scheduler address tcp://host:port "
+                             "(default: in process)")
 
 
 def params_from_args(args: argparse.Namespace) -> InspectParams:
@@ -91,9 +94,46 @@ def overlay_stems(probes: list[str]) -> list[str]:
     return out
 
 
+def _read_probes(paths: list[str]):
+    """``(BGR probe or None, read error or None)`` per path, lazily: the image travels with its task and a read
+    error fails only its own item."""
+    from .. import io
+    from ..errors import CvpipeError
+
+    for path in paths:
+        try:
+            yield io.read_image(path, "color"), None
+        except CvpipeError as exc:
+            yield None, exc
+
+
+def inspect_probe(item: tuple, shared: tuple) -> defects.Inspection:
+    """Inspect one probe, an item of :func:`cvpipe.compute.map_items` (runs on a worker).
+
+    Parameters
+    ----------
+    item : tuple
+        ``(BGR probe or None, read error or None)`` from :func:`_read_probes`.
+    shared : tuple
+        ``(reference gray, reference features, InspectParams)``, sent once per worker.
+
+    Returns
+    -------
+    cvpipe.defect.Inspection
+    """
+    from .. import defect as defects, io
+
+    probe, error = item
+    if error is not None:
+        raise error
+    ref_gray, ref_feats, params = shared
+    return defects.inspect(ref_gray, io.to_gray(probe), params, reference_features=ref_feats)
+
+
 def run(args: argparse.Namespace) -> int:
     from .. import defect as defects, homography, io
-    from ..errors import CvpipeError, EstimationError, InputError
+    from ..compute import check_scheduler, item_error, map_items, raise_unexpected
+    from ..errors import EstimationError, InputError
     from ..features import detect
 
     params = params_from_args(args)
@@ -109,19 +149,24 @@ def run(args: argparse.Namespace) -> int:
     stems = overlay_stems(args.probes)
     pictures = overlay_paths(args.probes, args.overlay, "_regions")
     results, errors = [], []
-    for path, stem, picture in progress(list(zip(args.probes, stems, pictures)), "inspect"):
-        try:
-            probe = io.read_image(path, "color")
-            r = defects.inspect(ref_gray, io.to_gray(probe), params, reference_features=ref_feats)
-        except CvpipeError as exc:
-            if exc.file is None:
-                exc.file = str(path)
+    # checked before any probe runs: a bad address is one line and nothing is written
+    scheduler = check_scheduler(args.scheduler, "--scheduler")
+    items = map_items(inspect_probe, _read_probes(args.probes), shared=(ref_gray, ref_feats, params),
+                      scheduler=scheduler, total=len(args.probes))
+    # the results first: the bar counts probes done, not started
+    for res, (path, stem, picture) in zip(items, progress(list(zip(args.probes, stems, pictures)), "inspect")):
+        if not res.ok:
+            raise_unexpected(res)  # a bug or an interrupt ends the command, as in a plain loop
+            exc = item_error(res, file=path)
             errors.append(exc)
-            msg = with_flags(str(exc), ["ecc_levels"])  # the hint names this command's flag
+            msg = with_flags(res.error, ["ecc_levels"])  # the hint names this command's flag
             msg = msg if str(path) in msg else f"{path}: {msg}"
             results.append({"probe": path, "verdict": None, "score": None, "regions": [], "H": None, "error": msg})
             continue
+        r = res.value
         results.append(result_dict(path, r))
+        if args.out or picture:
+            probe = io.read_image(path, "color")  # the driver draws; the worker only sent the verdict back
         if args.out:
             io.save_image(Path(args.out) / f"{stem}_regions.png", defects.draw_regions(probe, r.probe_regions))
             io.save_image(Path(args.out) / f"{stem}_diff.png", defects.heat_map(r.difference.diff, r.threshold))

@@ -45,8 +45,8 @@ def gallery_files(folder: str | Path) -> list[tuple[str, Path]]:
     return sorted(items, key=lambda t: (t[0], str(t[1])))
 
 
-def load_gallery(folder: str | Path, detector: str, max_features: int, params: LogoMatchParams) -> logo.Gallery:
-    """Read, detect and index a gallery folder (see :func:`gallery_files`)."""
+def gallery_references(folder: str | Path, detector: str, max_features: int) -> list[logo.Reference]:
+    """Read and detect every reference of a gallery folder (see :func:`gallery_files`)."""
     from .. import io, logo
     from ..features import detect
 
@@ -55,7 +55,88 @@ def load_gallery(folder: str | Path, detector: str, max_features: int, params: L
         gray = io.read_image(f, "gray")
         refs.append(logo.Reference(brand, str(f), detect(gray, detector, max_features),
                                     (gray.shape[1], gray.shape[0])))
+    return refs
+
+
+def load_gallery(folder: str | Path, detector: str, max_features: int, params: LogoMatchParams) -> logo.Gallery:
+    """Read, detect and index a gallery folder (see :func:`gallery_files`)."""
+    from .. import logo
+
+    refs = gallery_references(folder, detector, max_features)
     return logo.build_gallery(refs, params.min_features, params.reference_features)
+
+
+class SharedGallery:
+    """The gallery's references, indexed where they land (once per worker).
+
+    The trained matcher inside :class:`cvpipe.logo.Gallery` is an OpenCV object that cannot be pickled, so the
+    references travel and the index is rebuilt on first use; the rebuild is deterministic, so every worker matches
+    exactly as this process does.
+    """
+
+    def __init__(self, references: list, params: LogoMatchParams):
+        self.references, self.params, self._gallery = list(references), params, None
+
+    def __getstate__(self) -> dict:
+        return {"references": self.references, "params": self.params}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__init__(state["references"], state["params"])
+
+    @property
+    def gallery(self) -> logo.Gallery:
+        """The indexed gallery (built on first access)."""
+        if self._gallery is None:
+            from .. import logo
+
+            p = self.params
+            self._gallery = logo.build_gallery(self.references, p.min_features, p.reference_features)
+        return self._gallery
+
+
+def _read_scenes(paths: list[str]):
+    """``(scene, gray image or None, read error or None)`` per path, lazily: the image travels with its task and a
+    read error fails only its own item."""
+    from .. import io
+    from ..errors import CvpipeError
+
+    for path in paths:
+        try:
+            # as before: a JPEG decoded to gray is not cvtColor's gray
+            yield path, io.read_image(path, "gray"), None
+        except CvpipeError as exc:
+            yield path, None, exc
+
+
+def recognize_scene(item: tuple, shared: tuple) -> tuple[dict, list, list]:
+    """Recognise one scene, an item of :func:`cvpipe.compute.map_items` (runs on a worker).
+
+    Parameters
+    ----------
+    item : tuple
+        ``(scene name, gray image or None, read error or None)`` from :func:`_read_scenes`.
+    shared : tuple
+        ``(SharedGallery, method, max_features, min_long_side, LogoMatchParams, LogoVerifyParams, seed)``.
+
+    Returns
+    -------
+    record : dict
+        The scene's JSON record (:func:`detection_json`).
+    quads, labels : list
+        The outline and the label of every logo found, best first, for the overlay.
+    """
+    from .. import logo
+    from ..features import detect
+
+    scene, gray, error = item
+    if error is not None:
+        raise error
+    g, method, max_features, min_long_side, mp, vp, seed = shared
+    det = logo.recognize(g.gallery, detect(gray, method, max_features, min_long_side=min_long_side),
+                          (gray.shape[1], gray.shape[0]), mp, vp, seed)
+    found = logo.every_logo(det, vp.score_threshold)
+    return (detection_json(scene, det, found), [h.quad for h in found],
+            [f"{h.brand} ({h.score:.0f})" for h in found])
 
 
 def _logo_json(h) -> dict:
@@ -93,12 +174,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true",
                         help='print a JSON list, one record per scene ({"scene", "brand", "inliers", "score", '
                              '"quad", "logos": [every brand found, best first], "overlay"})')
+    parser.add_argument("--scheduler", default="", metavar="ADDR",
+                        help="run the scenes on Dask: 'local' or a scheduler address tcp://host:port "
+                             "(default: in process)")
 
 
 def run(args: argparse.Namespace) -> int:
-    from .. import io, logo
+    from .. import io
+    from ..compute import check_scheduler, map_items, raise_unexpected
     from ..errors import CvpipeError, InputError
-    from ..features import detect
     from ..overlays import draw_quads
 
     if args.max_features < 1:
@@ -113,28 +197,36 @@ def run(args: argparse.Namespace) -> int:
     from .. import homography
 
     compile_note("logo", homography)
+    scheduler = check_scheduler(args.scheduler, "--scheduler")
     with step(f"gallery ({args.method})"):
-        gallery = load_gallery(args.gallery, args.method, args.max_features, mp)
+        g = SharedGallery(gallery_references(args.gallery, args.method, args.max_features), mp)
+        g.gallery  # noqa: B018 - index here too, so that a gallery error is one line before any scene runs
     records, failed = [], 0
-    for scene, picture in progress(list(zip(args.scenes, overlay_paths(args.scenes, args.overlay, "_logo"))), "logo"):
-        try:
-            with step(scene):
-                gray = io.read_image(scene, "gray")  # as before: a JPEG decoded to gray is not cvtColor's gray
-                det = logo.recognize(gallery, detect(gray, args.method, args.max_features,
-                                                      min_long_side=args.min_long_side),
-                                      (gray.shape[1], gray.shape[0]), mp, vp, args.seed)
-            found = logo.every_logo(det, vp.score_threshold)
-            records.append(detection_json(scene, det, found))
-            if picture:
-                io.save_image(picture, draw_quads(io.read_image(scene, "color"), [h.quad for h in found],
-                                                  [f"{h.brand} ({h.score:.0f})" for h in found]))
-                records[-1]["overlay"] = picture
-        except CvpipeError as exc:
+    shared = (g, args.method, args.max_features, args.min_long_side, mp, vp, args.seed)
+    pictures = overlay_paths(args.scenes, args.overlay, "_logo")
+    items = map_items(recognize_scene, _read_scenes(args.scenes), shared=shared, scheduler=scheduler,
+                      total=len(args.scenes))
+    # the results first: the bar counts scenes done, not started
+    for res, (scene, picture) in zip(items, progress(list(zip(args.scenes, pictures)), "logo")):
+        if not res.ok:
+            raise_unexpected(res)  # a bug or an interrupt ends the command, as in a plain loop
             # one bad scene must not cost the answers for the others
             failed += 1
-            print(f"cvpipe: error: {exc}", file=sys.stderr)
+            print(f"cvpipe: error: {res.error}", file=sys.stderr)
             records.append({"scene": scene, "brand": None, "inliers": 0, "score": None, "quad": None, "logos": [],
-                            "error": str(exc)})
+                            "error": res.error})
+            continue
+        record, quads, labels = res.value
+        records.append(record)
+        if picture:
+            try:
+                io.save_image(picture, draw_quads(io.read_image(scene, "color"), quads, labels))
+            except CvpipeError as exc:
+                failed += 1
+                print(f"cvpipe: error: {exc}", file=sys.stderr)
+                records[-1]["error"] = str(exc)
+                continue
+            records[-1]["overlay"] = picture
     if args.json:
         print(io.dumps_json(records))
     else:

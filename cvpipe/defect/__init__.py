@@ -29,13 +29,13 @@ from ..params import DefectDiffParams, DefectRegionParams, InspectParams, load_i
 from ._util import check_gray
 from .diff import Difference, difference, fit_gain_bias
 from .regions import VERDICTS, Inspection, choose, find_regions, map_boxes, merge_boxes
-from .register import (ProbeRegistration, register_direct, register_probe, wants_alternative, warp_probe,
-                       warp_to_reference)
+from .register import (ProbeRegistration, register_direct, register_item, register_probe, wants_alternative,
+                       warp_probe, warp_to_reference)
 from .report import draw_regions, evaluate, heat_map
 
 __all__ = ["VERDICTS", "Difference", "InspectParams", "Inspection", "ProbeRegistration", "choose", "compare",
            "difference", "draw_regions", "evaluate", "find_regions", "fit_gain_bias", "heat_map", "inspect",
-           "load_inspect_params", "map_boxes", "merge_boxes", "register_direct", "register_probe",
+           "load_inspect_params", "map_boxes", "merge_boxes", "register_direct", "register_item", "register_probe",
            "wants_alternative", "warp_probe", "warp_to_reference"]
 
 

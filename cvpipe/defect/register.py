@@ -373,3 +373,52 @@ def warp_probe(probe: np.ndarray, H: np.ndarray, reference_shape: tuple[int, int
     warped = warp_to_reference(probe, H, reference_shape)
     valid = warp_to_reference(np.full(probe.shape[:2], 255, np.uint8), H, reference_shape) == 255
     return warped, valid
+
+
+def register_item(item: tuple, shared: tuple) -> dict:
+    """Register one probe with its direct alternative and warp it: the per-probe work of the ``defect_register``
+    stage, an item of :func:`cvpipe.compute.map_items` (it may run on another machine: data in, data out).
+
+    Parameters
+    ----------
+    item : tuple
+        ``(probe gray image, probe Features, (M,) match indices)``.
+    shared : tuple
+        ``(reference gray image, reference Features, DefectRegisterParams)``, sent once per worker.
+
+    Returns
+    -------
+    dict
+        ``probe_shape``, ``primary`` (:class:`ProbeRegistration`), ``alternative`` (one or None), ``alternative_error`` (str or
+        None), ``arrays`` (``H``, ``warped``, ``valid`` and ``alt_*`` for the alternative) and ``seconds``
+        (``register``, ``direct_alternative``: this item's wall times, for the stage's timings).
+
+    Raises
+    ------
+    InputError, EstimationError
+        As :func:`register_probe` (the stage drops the probe with the reason).
+    """
+    import time
+
+    probe, features, matches = item
+    reference, reference_features, p = shared
+    t0 = time.perf_counter()
+    reg = register_probe(reference, probe, p, reference_features=reference_features, probe_features=features,
+                         matches=matches)
+    seconds = {"register": time.perf_counter() - t0}
+    warped, valid = warp_probe(probe, reg.H, reference.shape)
+    out = {"probe_shape": probe.shape, "primary": reg, "alternative": None, "alternative_error": None,
+           "seconds": seconds,
+           "arrays": {"H": reg.H, "warped": warped, "valid": valid}}
+    if wants_alternative(reg, p):
+        t0 = time.perf_counter()
+        try:
+            alt = register_direct(reference, probe, p, matches=reg.matches, inliers=reg.inliers)
+        except EstimationError as exc:
+            out["alternative_error"] = str(exc)
+        else:
+            out["alternative"] = alt
+            warped, valid = warp_probe(probe, alt.H, reference.shape)
+            out["arrays"].update(alt_H=alt.H, alt_warped=warped, alt_valid=valid)
+        seconds["direct_alternative"] = time.perf_counter() - t0
+    return out
