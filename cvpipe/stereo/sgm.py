@@ -20,8 +20,8 @@ import cv2
 import numpy as np
 from numba import njit, prange
 
-from . import metrics
-from .errors import check_memory
+from .. import metrics
+from ..errors import check_memory
 
 #: most bits a census signature can hold (uint64)
 _CENSUS_BITS = 64

@@ -13,9 +13,11 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .. import io
+from ..errors import InputError
 from . import depth as depth_mod
-from . import io, rectify
-from .errors import InputError
+from . import rectify
+from .calibration import Calibration
 
 #: the kinds of rectification (``rect.json`` ``kind``)
 KINDS = ("none", "calibrated", "uncalibrated")
@@ -63,21 +65,21 @@ def feature_matches(left: np.ndarray, right: np.ndarray, detector: str = "sift",
                     ratio: float = 0.8, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Putative matches left -> right (:func:`cvpipe.homography.correspondences`), the same on every run: FLANN's
     randomized KD-trees draw from OpenCV's global generator, which is seeded with ``seed`` first."""
-    from .homography import correspondences
+    from ..homography import correspondences
 
     cv2.setRNGSeed(int(seed))
     return correspondences(io.to_gray(left), io.to_gray(right), detector, max_features, ratio)
 
 
 def rectify_pair(left: np.ndarray, right: np.ndarray, pts1: np.ndarray, pts2: np.ndarray,
-                 calib: rectify.Calibration | None, *, threshold: float = 1.0, margin: float = 1.0, seed: int = 0,
+                 calib: Calibration | None, *, threshold: float = 1.0, margin: float = 1.0, seed: int = 0,
                  rectified_max_dy: float = 1.0, rectified_share: float = 0.75) -> RectifiedPair:
     """Rectify one pair the way the pipeline does.
 
     The rule: a calibration that holds the rig's pose (an OpenCV stereo file: K1 D1 K2 D2 R T) gives a calibrated
     rectification (``cv2.stereoRectify``); else a pair whose matches already lie on the same rows
-    (:func:`cvpipe.rectify.looks_rectified`) is kept as it is (``kind = "none"``, identity homographies); else it
-    is rectified from its matches (:func:`cvpipe.rectify.rectify_uncalibrated`, Hartley + Loop-Zhang), with a
+    (:func:`cvpipe.stereo.rectify.looks_rectified`) is kept as it is (``kind = "none"``, identity homographies); else it
+    is rectified from its matches (:func:`cvpipe.stereo.rectify.rectify_uncalibrated`, Hartley + Loop-Zhang), with a
     Middlebury ``calib.txt`` (a rectified rig: no pose) giving only the focal length and baseline for depth.
 
     Parameters
@@ -89,9 +91,9 @@ def rectify_pair(left: np.ndarray, right: np.ndarray, pts1: np.ndarray, pts2: np
     calib : Calibration or None
         The pair's calibration.
     threshold, margin, seed
-        As in :func:`cvpipe.rectify.rectify_uncalibrated` (``seed`` seeds the RANSAC).
+        As in :func:`cvpipe.stereo.rectify.rectify_uncalibrated` (``seed`` seeds the RANSAC).
     rectified_max_dy, rectified_share
-        As ``max_dy`` / ``share`` of :func:`cvpipe.rectify.looks_rectified`.
+        As ``max_dy`` / ``share`` of :func:`cvpipe.stereo.rectify.looks_rectified`.
 
     Returns
     -------
