@@ -97,9 +97,9 @@ def run(args: argparse.Namespace) -> int:
     method, params_cls = args.method, CLI_METHODS[args.method]
     options = params_cls().model_dump()
     if method == "sgm":
-        from ..stereo import sgm
+        from ..stereo import _kernels
 
-        compile_note("stereo", sgm)
+        compile_note("stereo", _kernels)
     with step(f"disparity ({method})"):
         disp = stereo.compute_disparity(left, right, max_disp, method, **options)
     _save_map(args.out, disp.astype(np.float32), 0.0, float(max_disp), "px", "disparity")

@@ -5,11 +5,13 @@
   (``parse_calibration``);
 - :mod:`~cvpipe.stereo.rectify`: uncalibrated (Hartley + Loop-Zhang) and calibrated rectification
   (``rectify_uncalibrated``, ``rectify_calibrated``, ``warp_pair``);
-- :mod:`~cvpipe.stereo.pipeline`: the per-pair rectify step of the pipeline (``rectify_pair``) and the stages'
-  metrics, pictures and report summary;
-- :mod:`~cvpipe.stereo.sgm`: our semi-global matching (``disparity_sgm``, ``fill_invalid``), OpenCV's block
-  matching and SGBM, the method registry (``METHODS``, ``compute_disparity``) and the accuracy against the truth;
-- :mod:`~cvpipe.stereo.depth`: depth from disparity, the point cloud and its PLY bytes, colour-mapped pictures.
+- :mod:`~cvpipe.stereo.pipeline`: the per-pair rectify step of the pipeline (``rectify_pair``);
+- :mod:`~cvpipe.stereo.sgm`: our semi-global matching (``disparity_sgm``, ``fill_invalid``), whose numba kernels
+  are in :mod:`~cvpipe.stereo._kernels`;
+- :mod:`~cvpipe.stereo.opencv_baseline`: OpenCV's block matching and SGBM, and the method registry
+  (``METHODS``, ``compute_disparity``);
+- :mod:`~cvpipe.stereo.depth`: depth from disparity, the point cloud and its PLY bytes, colour-mapped pictures;
+- :mod:`~cvpipe.stereo.report`: accuracy against the truth, the stages' metrics, pictures and report summary.
 
 Examples
 --------
@@ -28,15 +30,15 @@ True
 from .calibration import Calibration, parse_calibration, parse_middlebury_calib, parse_opencv_calib
 from .depth import colorize, depth_from_disparity, parse_ply, ply_bytes, point_cloud
 from .epipolar import FundamentalFit, eight_point, epipoles, find_fundamental, sampson_distance, seven_point
-from .sgm import METHODS, SGBM_MODES, compute_disparity, disparity_opencv_bm, disparity_opencv_sgbm
+from .opencv_baseline import METHODS, SGBM_MODES, compute_disparity, disparity_opencv_bm, disparity_opencv_sgbm
 from .pipeline import KINDS, RectifiedPair, feature_matches, rectify_pair
 from .rectify import (DepthGeometry, Rectification, distortion, looks_rectified, max_disp_from_matches,
                       opencv_uncalibrated, rectified_depth_geometry, rectify_calibrated, rectify_uncalibrated,
                       rectifying_homographies, robust_disparity_range, warp_pair)
-from .pipeline import (depth_metrics, depth_picture, depth_result, extend_summary, rectification_picture,
-                       rectify_metrics, vertical_error_plot)
-from .sgm import (BAD_THRESHOLDS, TRUTH_KEYS, colorize_disparity, comparison_picture, error_picture, evaluate,
-                  merge_dropped, metric_key, metrics_of, pair_result, quality_plots, report_summary, to_png16)
+from .report import (BAD_THRESHOLDS, TRUTH_KEYS, colorize_disparity, comparison_picture, depth_metrics,
+                     depth_picture, depth_result, error_picture, evaluate, extend_summary, merge_dropped,
+                     metric_key, metrics_of, pair_result, quality_plots, rectification_picture, rectify_metrics,
+                     report_summary, to_png16, vertical_error_plot)
 from .sgm import disparity_sgm, fill_invalid
 
 __all__ = [
