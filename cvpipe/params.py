@@ -616,8 +616,8 @@ class StereoSgbmParams(Section):
 
 
 class StereoRectifyParams(Section):
-    """``stereo.rectify``: features, matching and the fundamental-matrix fit of :mod:`cvpipe.rectify`, and when a
-    pair counts as already rectified (:func:`cvpipe.rectify.looks_rectified`)."""
+    """``stereo.rectify``: features, matching and the fundamental-matrix fit of :mod:`cvpipe.stereo.rectify`, and when a
+    pair counts as already rectified (:func:`cvpipe.stereo.rectify.looks_rectified`)."""
 
     detector: Detector = "sift"
     max_features: int = Field(4000, ge=1, le=1_000_000)

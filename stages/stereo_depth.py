@@ -8,7 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cvpipe import depth, io, stereo_pipeline
+from cvpipe import io, stereo
+from cvpipe.stereo import depth
 from cvpipe.errors import InputError
 from stages._runner import Stage, run
 
@@ -39,10 +40,10 @@ def stereo_depth(st: Stage) -> None:
         comment = f"units {geo['unit']}; camera frame of the rectified left image: x right, y down, z forward"
         with io.atomic_path(out / name / "cloud.ply") as tmp:
             tmp.write_bytes(depth.ply_bytes(xyz, rgb, comment=comment))
-        results[name], units[name] = stereo_pipeline.depth_result(z, len(xyz), geo), geo["unit"]
+        results[name], units[name] = stereo.depth_result(z, len(xyz), geo), geo["unit"]
     io.save_json(out / "run.json", {"method": disp_run["method"], "pairs": results, "units": units,
                                     "disparity_only": only, "dropped": st.dropped})
-    io.save_json(a.metrics, stereo_pipeline.depth_metrics(results))
+    io.save_json(a.metrics, stereo.depth_metrics(results))
     st.made(f"{len(results)} depth maps and point clouds in {out}" +
             (f"; disparity only (no calibration): {', '.join(only)}" if only else ""))
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cvpipe import datasets, io, stereo, stereo_pipeline
+from cvpipe import datasets, io, stereo
 from stages._runner import Stage, run
 from stages.stereo_disparity import read_truth
 
@@ -28,7 +28,7 @@ def stereo_report(st: Stage) -> None:
         left, right = io.read_image(here / "left.png"), io.read_image(here / "right.png")
         m = io.load_npz(here / "matches.npz")
         path = out / f"{pair.name}_rectified.png"
-        io.save_image(path, stereo_pipeline.rectification_picture(
+        io.save_image(path, stereo.rectification_picture(
             io.read_image(pair.left), io.read_image(pair.right), left, right, rec["H_left"], rec["H_right"],
             m["left"], m["right"]))
         err = rec.get("vertical_error_median_px")
@@ -40,7 +40,7 @@ def stereo_report(st: Stage) -> None:
             z = np.load(depth_dir / pair.name / "depth.npy", allow_pickle=False)
             unit = depth_run["units"][pair.name]
             path = out / f"{pair.name}_depth.png"
-            io.save_image(path, stereo_pipeline.depth_picture(left, z, unit))
+            io.save_image(path, stereo.depth_picture(left, z, unit))
             extra.append({"path": path.as_posix(), "caption": (
                 f"{pair.name}: depth in {unit} from {depth_run['method']} (black = no depth); point cloud "
                 f"{(depth_dir / pair.name / 'cloud.ply').as_posix()}")})
@@ -59,10 +59,10 @@ def stereo_report(st: Stage) -> None:
     dropped = rect_run["dropped"] + stereo.merge_dropped(runs) + depth_run["dropped"]
     summary = stereo.report_summary(runs, pictures, dropped, p.error_clip)
     with_truth = tuple(q.name for q in pairs if q.truth is not None)
-    io.save_json(a.summary, stereo_pipeline.extend_summary(summary, rects, depth_run, extra, with_truth))
+    io.save_json(a.summary, stereo.extend_summary(summary, rects, depth_run, extra, with_truth))
     for name, rows in stereo.quality_plots(runs).items():
         io.save_json(Path(a.plots) / f"{name}.json", rows)
-    io.save_json(Path(a.plots) / "vertical_error.json", stereo_pipeline.vertical_error_plot(rects))
+    io.save_json(Path(a.plots) / "vertical_error.json", stereo.vertical_error_plot(rects))
     st.made(f"{len(pictures)} pairs compared over {len(runs)} methods, pictures in {out}")
     for d in dropped:
         st.drop(d["item"], d["reason"])

@@ -1,4 +1,4 @@
-"""cvpipe.depth (depth formula, point cloud, PLY bytes, colour-bar pictures) and the `cvpipe stereo` command with
+"""cvpipe.stereo.depth (depth formula, point cloud, PLY bytes, colour-bar pictures) and the `cvpipe stereo` command with
 --rectify / --calib / --depth / --ply end to end on the unrectified motorcycle sample."""
 
 import json
@@ -7,7 +7,8 @@ import cv2
 import numpy as np
 import pytest
 
-from cvpipe import cli, depth, io, rectify, samples
+from cvpipe import cli, io, samples
+from cvpipe.stereo import calibration, depth, rectify
 from cvpipe.errors import InputError
 
 
@@ -164,7 +165,7 @@ def test_cli_bad_calibration_exits_2(sample_pair, tmp_path, capsys):
     code, _, err = run_cli(capsys, *args, "--depth", tmp_path / "z.npy")
     assert code == 2 and "`--depth` and `--ply` need `--calib FILE`" in err
     code, _, err = run_cli(capsys, *args, "--ply", tmp_path / "p.txt", "--calib", folder / "calib.txt")
-    assert code == 2 and "`--ply` must end in one of .ply" in err
+    assert code == 2 and "`--ply` must end in .ply" in err
     assert not (tmp_path / "d.npy").exists()
 
 
@@ -224,7 +225,7 @@ def test_cli_calibrated_rectification_from_opencv_yaml(sample_pair, tmp_path, ca
     # stereoRectify turns the left camera (R1) and changes its intrinsics (P1): a rectified pixel p' comes from
     # the original pixel p = H_left^-1 p', whose true 3-D point K1^-1 p * Z_true has the rectified depth
     # (R1 K1^-1 p)_z * Z_true
-    g = rectify.rectify_calibrated(rectify.parse_calibration((tmp_path / "rig.yml").read_text(), "rig.yml"),
+    g = rectify.rectify_calibrated(calibration.parse_calibration((tmp_path / "rig.yml").read_text(), "rig.yml"),
                                    (741, 500))
     H_left = np.array(doc["H_left"])
     assert np.allclose(H_left, g.H_left)

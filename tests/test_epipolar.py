@@ -1,10 +1,10 @@
-"""cvpipe.epipolar: the 8-point and 7-point solvers and the RANSAC on synthetic scenes seen by two known cameras,
+"""cvpipe.stereo.epipolar: the 8-point and 7-point solvers and the RANSAC on synthetic scenes seen by two known cameras,
 and the degeneracy / validation branches."""
 
 import numpy as np
 import pytest
 
-from cvpipe import epipolar
+from cvpipe.stereo import epipolar
 from cvpipe.errors import EstimationError, InputError
 
 K = np.array([[600.0, 0.0, 320.0], [0.0, 600.0, 240.0], [0.0, 0.0, 1.0]])

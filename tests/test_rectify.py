@@ -1,11 +1,11 @@
-"""cvpipe.rectify: uncalibrated rectification of synthetic unrectified pairs (known cameras), calibrated
+"""cvpipe.stereo.rectify: uncalibrated rectification of synthetic unrectified pairs (known cameras), calibrated
 rectification of a known rig, and the Middlebury / OpenCV calibration parsers with their error messages."""
 
 import cv2
 import numpy as np
 import pytest
 
-from cvpipe import rectify
+from cvpipe.stereo import calibration, rectify
 from cvpipe.errors import EstimationError, InputError
 
 W, H = 640, 480
@@ -123,7 +123,7 @@ class TestMiddleburyCalib:
     def test_parse(self, tmp_path):
         f = tmp_path / "calib.txt"
         f.write_text(MIDDLEBURY)
-        c = rectify.parse_calibration(f.read_text(), str(f))
+        c = calibration.parse_calibration(f.read_text(), str(f))
         assert c.rectified and c.unit == "mm" and c.size == (741, 500) and c.ndisp == 64
         assert c.K1[0, 0] == 994.978 and c.K2[0, 2] == 342.279 and c.doffs == 31.086
         assert c.baseline == pytest.approx(193.001) and np.array_equal(c.R, np.eye(3))
@@ -135,16 +135,16 @@ class TestMiddleburyCalib:
         f = tmp_path / "calib.txt"
         f.write_text("".join(line + "\n" for line in MIDDLEBURY.splitlines() if not line.startswith(key + "=")))
         with pytest.raises(InputError, match=rf"calib\.txt: missing key `{key}`"):
-            rectify.parse_calibration(f.read_text(), str(f))
+            calibration.parse_calibration(f.read_text(), str(f))
 
     def test_bad_values(self):
         with pytest.raises(InputError, match="`cam0` must be a 3x3 matrix"):
-            rectify.parse_middlebury_calib(MIDDLEBURY.replace("0 0 1]\ncam1", "0 1]\ncam1"), "c.txt")
+            calibration.parse_middlebury_calib(MIDDLEBURY.replace("0 0 1]\ncam1", "0 1]\ncam1"), "c.txt")
         with pytest.raises(InputError, match="`baseline` must be a number"):
-            rectify.parse_middlebury_calib(MIDDLEBURY.replace("193.001", "abc"), "c.txt")
+            calibration.parse_middlebury_calib(MIDDLEBURY.replace("193.001", "abc"), "c.txt")
 
     def test_size_mismatch_names_the_key(self):
-        c = rectify.parse_middlebury_calib(MIDDLEBURY, "calib.txt")
+        c = calibration.parse_middlebury_calib(MIDDLEBURY, "calib.txt")
         with pytest.raises(InputError, match=r"calib\.txt: `width` says 741x500 but the images are 740x500"):
             c.check_size((740, 500))
         with pytest.raises(InputError, match="`height`"):
@@ -171,7 +171,7 @@ class TestOpenCVCalib:
         values = write_opencv_yaml(f)
         text = f.read_text()
         assert text.startswith("%YAML") and "!!opencv-matrix" in text
-        c = rectify.parse_calibration(text, str(f))
+        c = calibration.parse_calibration(text, str(f))
         assert not c.rectified and c.size == (640, 480)
         for k in ("K1", "K2", "R"):
             assert np.allclose(getattr(c, k), values[k])
@@ -187,7 +187,7 @@ class TestOpenCVCalib:
                      + "D2: " + m.format(r=1, c=4, d="0.09, -0.04, 0., 0.")
                      + "R: " + m.format(r=3, c=3, d="1., 0., 0., 0., 1., 0., 0., 0., 1.")
                      + "T: " + m.format(r=3, c=1, d="-60., 0.5, 0."))
-        c = rectify.parse_calibration(f.read_text(), str(f))
+        c = calibration.parse_calibration(f.read_text(), str(f))
         assert c.size == (320, 240) and c.K2[0, 0] == 505.0 and c.D1.shape == (5,) and c.D2.shape == (4,)
         assert c.baseline == pytest.approx(np.hypot(60.0, 0.5))
 
@@ -196,23 +196,23 @@ class TestOpenCVCalib:
         f = tmp_path / "stereo.yml"
         write_opencv_yaml(f, skip=(key,))
         with pytest.raises(InputError, match=rf"stereo\.yml: missing key `{key}`"):
-            rectify.parse_calibration(f.read_text(), str(f))
+            calibration.parse_calibration(f.read_text(), str(f))
 
     def test_size_mismatch_and_garbage(self, tmp_path):
         f = tmp_path / "stereo.yml"
         write_opencv_yaml(f)
-        c = rectify.parse_calibration(f.read_text(), str(f))
+        c = calibration.parse_calibration(f.read_text(), str(f))
         with pytest.raises(InputError, match=r"stereo\.yml: `image_size \(or K1/K2\)` says 640x480"):
             c.check_size((320, 240))
         with pytest.raises(InputError, match="bad.yml: not a readable OpenCV"):
-            rectify.parse_opencv_calib("%YAML:1.0\nK1: [unclosed\n", "bad.yml")
+            calibration.parse_opencv_calib("%YAML:1.0\nK1: [unclosed\n", "bad.yml")
 
 
 class TestRectifiedGeometry:
     def test_opencv_rig_must_be_rectified_to_be_used_as_is(self, tmp_path):
         f = tmp_path / "stereo.yml"
         write_opencv_yaml(f)  # R is a small rotation: not a rectified rig
-        c = rectify.parse_calibration(f.read_text(), str(f))
+        c = calibration.parse_calibration(f.read_text(), str(f))
         with pytest.raises(InputError, match=r"stereo\.yml: the calibration describes cameras that are not "
                                              r"rectified .*add --rectify"):
             rectify.rectified_depth_geometry(c)
@@ -222,7 +222,7 @@ class TestRectifiedGeometry:
         for k, v in {"K1": K, "D1": np.zeros(5), "K2": K2, "D2": np.zeros(5), "R": np.eye(3),
                      "T": np.array([[-0.2], [0.0], [0.0]])}.items():
             fs.write(k, v)
-        g = rectify.rectified_depth_geometry(rectify.parse_opencv_calib(fs.releaseAndGetString(), "r.yml"))
+        g = rectify.rectified_depth_geometry(calibration.parse_opencv_calib(fs.releaseAndGetString(), "r.yml"))
         # a rectified rig: doffs is the difference of the principal columns, the baseline |T|
         assert g.doffs == pytest.approx(12.0) and g.baseline == pytest.approx(0.2) and g.focal == 600.0
 
@@ -236,7 +236,7 @@ class TestCalibrated:
         fs = cv2.FileStorage("x.yml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
         for k, v in {"K1": K, "D1": np.zeros(5), "K2": K2, "D2": np.zeros(5), "R": R, "T": t.reshape(3, 1)}.items():
             fs.write(k, v)
-        calib = rectify.parse_opencv_calib(fs.releaseAndGetString(), "rig.yml")
+        calib = calibration.parse_opencv_calib(fs.releaseAndGetString(), "rig.yml")
         X = points(500, 9)
         p1, p2 = project(X, K), project(X, K2, R, t)
         rect = rectify.rectify_calibrated(calib, (W, H), p1, p2)

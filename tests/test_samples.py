@@ -94,10 +94,10 @@ def test_stereo_truth(built):
 def test_stereo_unrectified_sample(built):
     """The unrectified pair: its calib.txt parses for the image size, and the true correspondences carried by
     H_unrectify are off the same row (so the pipeline must rectify it) by up to the drawn shift and rotation."""
-    from cvpipe import rectify
+    from cvpipe.stereo import calibration, rectify
 
     s = built["stereo"]
-    calib = rectify.parse_calibration(s.texts["motorcycle_unrectified/calib.txt"], "calib.txt")
+    calib = calibration.parse_calibration(s.texts["motorcycle_unrectified/calib.txt"], "calib.txt")
     img = s.images["motorcycle_unrectified/right.png"]
     calib.check_size((img.shape[1], img.shape[0]))
     arrays = s.arrays["motorcycle_unrectified/truth.npz"]

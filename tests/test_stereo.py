@@ -395,3 +395,13 @@ def test_stages_with_and_without_truth(tmp_path, repo_root):
     assert with_truth.shape[1] == without.shape[1] == 3 * 320 and with_truth.shape[0] == 2 * without.shape[0]
     assert {r["pair"] for r in io.load_json(tmp_path / "plots/bad_2.json")} == {"planes"}
     assert len(io.load_json(tmp_path / "plots/valid_fraction.json")) == 4
+
+
+def test_package_examples_run():
+    """The Examples section of cvpipe.stereo runs as a doctest (a random-dot pair shifted by 4 px gives 4 px)."""
+    import doctest
+
+    import cvpipe.stereo
+
+    result = doctest.testmod(cvpipe.stereo)
+    assert result.attempted > 0 and result.failed == 0

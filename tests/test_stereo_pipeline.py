@@ -10,7 +10,8 @@ import cv2
 import numpy as np
 import pytest
 
-from cvpipe import depth, io, rectify, samples
+from cvpipe import io, samples
+from cvpipe.stereo import depth, rectify
 from cvpipe.report import validate_summary
 
 

@@ -6,14 +6,14 @@ point (``K R K^-1``, with the image centre as principal point and ``FOCAL_PER_WI
 the pair's calibration is known), a scale change of up to ``MAX_SCALE`` about the principal point and a vertical
 shift of up to ``MAX_SHIFT_PX``. SIFT matches of (left, unrectified right) go to both methods:
 
-- ours: :func:`cvpipe.rectify.rectify_uncalibrated` (7-point RANSAC, Hartley + Loop-Zhang homographies, disparity
+- ours: :func:`cvpipe.stereo.rectify.rectify_uncalibrated` (7-point RANSAC, Hartley + Loop-Zhang homographies, disparity
   shift and ``max_disp``);
 - OpenCV: ``cv2.findFundamentalMat`` (USAC_MAGSAC, same threshold) + ``cv2.stereoRectifyUncalibrated``.
 
 True correspondences come from the true disparity of the original pair: the left pixel (x, y) with disparity d
 matches (x - d, y) in the original right view, i.e. ``H_u (x - d, y)`` in the unrectified one. Reported per pair:
 median and 95th percentile of their vertical error after rectification (px), the distortion of the left image
-(aspect change and skew of its mid-lines, see :func:`cvpipe.rectify.distortion`), the rectification time (given
+(aspect change and skew of its mid-lines, see :func:`cvpipe.stereo.rectify.distortion`), the rectification time (given
 the matches; wall and CPU seconds, median of ``--repeats`` interleaved calls after a warm-up), and bad-2.0 of our SGM on the rectified
 pair against the true disparity carried into the rectified frame, next to bad-2.0 on the original pair (both with
 the smallest multiple of 16 above the largest true disparity as range). The unrectifying warp itself pushes part
@@ -33,8 +33,9 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from .. import io, rectify, stereo
+from .. import io, stereo
 from ..homography import correspondences
+from ..stereo import rectify
 
 #: unrectifying transform bounds (the issue's benchmark protocol)
 MAX_ROTATION_DEG = 3.0

@@ -14,7 +14,7 @@ from . import compile_note, step
 if TYPE_CHECKING:
     import numpy as np
 
-    from .. import rectify
+    from ..stereo import calibration
 
 HELP = ("disparity map of a stereo pair (float32 .npy of the LEFT image, NaN = invalid), rectified first with "
         "--rectify; depth and a point cloud with --calib")
@@ -80,9 +80,9 @@ def _read(path: str) -> np.ndarray:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from .. import depth as depth_mod
     from .. import io, stereo
     from ..errors import InputError
+    from ..stereo import depth as depth_mod
 
     for flag, path, kinds in (("`-o`", args.out, (".npy", ".png")), ("`--depth`", args.depth, (".npy", ".png")),
                               ("`--ply`", args.ply, (".ply",)), ("`--overlay`", args.overlay, (".png",))):
@@ -97,7 +97,9 @@ def run(args: argparse.Namespace) -> int:
     method, params_cls = args.method, CLI_METHODS[args.method]
     options = params_cls().model_dump()
     if method == "sgm":
-        compile_note("stereo", stereo)
+        from ..stereo import _kernels
+
+        compile_note("stereo", _kernels)
     with step(f"disparity ({method})"):
         disp = stereo.compute_disparity(left, right, max_disp, method, **options)
     _save_map(args.out, disp.astype(np.float32), 0.0, float(max_disp), "px", "disparity")
@@ -136,8 +138,8 @@ def _max_disp_arg(text: str):
     return v
 
 
-def _read_calib(path: str) -> rectify.Calibration:
-    from .. import rectify
+def _read_calib(path: str) -> calibration.Calibration:
+    from ..stereo import calibration
     from ..errors import InputError
 
     try:
@@ -146,12 +148,13 @@ def _read_calib(path: str) -> rectify.Calibration:
         raise InputError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: cannot read the calibration ({exc})") from None
-    return rectify.parse_calibration(text, path)
+    return calibration.parse_calibration(text, path)
 
 
 def _prepare(args, left, right, calib):
     """Rectify when asked; returns (JSON fields, depth geometry or None, left, right, auto max_disp)."""
-    from .. import io, rectify
+    from .. import io
+    from ..stereo import rectify
     from ..errors import InputError
 
     if left.shape[:2] != right.shape[:2]:
@@ -194,8 +197,8 @@ def _save_map(path: str, values: np.ndarray, lo, hi, unit: str, label: str) -> N
     """.npy: the float32 array; .png: the colour-mapped picture with its colour bar."""
     import numpy as np
 
-    from .. import depth as depth_mod
     from .. import io
+    from ..stereo import depth as depth_mod
 
     if path.lower().endswith(".png"):
         io.save_image(path, depth_mod.colorize(values, lo, hi, unit=unit, label=label))

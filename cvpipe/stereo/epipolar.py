@@ -32,8 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import EstimationError, InputError
-from .geometry import as_points, collinear, hartley_normalization
+from ..errors import EstimationError, InputError
+from ..geometry import as_points, collinear, hartley_normalization
 
 #: default iteration cap of :func:`find_fundamental` (7-point samples; ~65 % outliers at confidence 0.999)
 DEFAULT_MAX_ITERS = 5_000
@@ -364,7 +364,7 @@ def _finish(x1n, x2n, p1, p2, T1, T2, F, threshold, min_inliers):
 
 def _homography_share(p1: np.ndarray, p2: np.ndarray, threshold: float, rng: np.random.Generator) -> float:
     """Share of the correspondences that the best RANSAC homography maps within ``2 * threshold`` px."""
-    from .homography import find_homography
+    from ..homography import find_homography
 
     try:
         fit = find_homography(p1, p2, threshold=2.0 * threshold, rng=rng, max_iters=2000)

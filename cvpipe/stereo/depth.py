@@ -11,7 +11,7 @@ import math
 import cv2
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 
 
 def _check_disp(disp) -> np.ndarray:

@@ -1,0 +1,142 @@
+"""The stereo pipeline's per-pair rectify step: rectify -> disparity -> depth -> report.
+
+:func:`rectify_pair` decides how a pair is rectified (calibrated, uncalibrated, or not at all when it already
+looks rectified) and returns the record that ``stereo_rectify`` writes as ``rect.json``; the metrics, pictures and
+report summary of the stages are in :mod:`cvpipe.stereo.report`. Pure functions: no disk access (the stage scripts
+in ``stages/`` read and write).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .. import io
+from ..errors import InputError
+from . import rectify
+from .calibration import Calibration
+
+#: the kinds of rectification (``rect.json`` ``kind``)
+KINDS = ("none", "calibrated", "uncalibrated")
+
+
+@dataclass(frozen=True, eq=False)
+class RectifiedPair:
+    """One pair after :func:`rectify_pair`.
+
+    Attributes
+    ----------
+    left, right : (H, W, 3) uint8
+        The images in the rectified frame (the inputs themselves for ``kind == "none"``).
+    record : dict
+        JSON-ready: ``kind``, ``H_left``, ``H_right`` (original -> rectified pixels), ``matches``, ``max_disp``
+        (only when estimated from the matches), ``shift_px``, ``disparity_range_px``, ``vertical_error_median_px``,
+        ``vertical_error_p95_px``, ``vertical_error_over`` (which matches), ``inliers`` (uncalibrated), ``depth``
+        (focal, cx, cy, baseline, doffs, unit, exact; or None without a calibration).
+    points_left, points_right : (N, 2) float64
+        The matches that the vertical error is measured on, in rectified pixels (for the picture).
+    """
+
+    left: np.ndarray
+    right: np.ndarray
+    record: dict
+    points_left: np.ndarray
+    points_right: np.ndarray
+
+
+def _geometry(g: rectify.DepthGeometry | None) -> dict | None:
+    if g is None:
+        return None
+    return {"focal": g.focal, "cx": g.cx, "cy": g.cy, "baseline": g.baseline, "doffs": g.doffs, "unit": g.unit,
+            "exact": bool(g.exact)}
+
+
+def _vertical(record: dict, dy: np.ndarray, over: str) -> None:
+    if len(dy):
+        record["vertical_error_median_px"] = float(np.median(dy))
+        record["vertical_error_p95_px"] = float(np.percentile(dy, 95))
+    record["vertical_error_over"] = f"{len(dy)} {over}"
+
+
+def feature_matches(left: np.ndarray, right: np.ndarray, detector: str = "sift", max_features: int = 4000,
+                    ratio: float = 0.8, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Putative matches left -> right (:func:`cvpipe.homography.correspondences`), the same on every run: FLANN's
+    randomized KD-trees draw from OpenCV's global generator, which is seeded with ``seed`` first."""
+    from ..homography import correspondences
+
+    cv2.setRNGSeed(int(seed))
+    return correspondences(io.to_gray(left), io.to_gray(right), detector, max_features, ratio)
+
+
+def rectify_pair(left: np.ndarray, right: np.ndarray, pts1: np.ndarray, pts2: np.ndarray,
+                 calib: Calibration | None, *, threshold: float = 1.0, margin: float = 1.0, seed: int = 0,
+                 rectified_max_dy: float = 1.0, rectified_share: float = 0.75) -> RectifiedPair:
+    """Rectify one pair the way the pipeline does.
+
+    The rule: a calibration that holds the rig's pose (an OpenCV stereo file: K1 D1 K2 D2 R T) gives a calibrated
+    rectification (``cv2.stereoRectify``); else a pair whose matches already lie on the same rows
+    (:func:`cvpipe.stereo.rectify.looks_rectified`) is kept as it is (``kind = "none"``, identity homographies); else it
+    is rectified from its matches (:func:`cvpipe.stereo.rectify.rectify_uncalibrated`, Hartley + Loop-Zhang), with a
+    Middlebury ``calib.txt`` (a rectified rig: no pose) giving only the focal length and baseline for depth.
+
+    Parameters
+    ----------
+    left, right : (H, W, 3) uint8
+        The pair (BGR), same size.
+    pts1, pts2 : (N, 2) float
+        Putative feature matches, left and right pixels.
+    calib : Calibration or None
+        The pair's calibration.
+    threshold, margin, seed
+        As in :func:`cvpipe.stereo.rectify.rectify_uncalibrated` (``seed`` seeds the RANSAC).
+    rectified_max_dy, rectified_share
+        As ``max_dy`` / ``share`` of :func:`cvpipe.stereo.rectify.looks_rectified`.
+
+    Returns
+    -------
+    RectifiedPair
+
+    Raises
+    ------
+    InputError
+        Images of different sizes, a calibration for another image size.
+    EstimationError
+        The pair cannot be rectified (too few matches, a planar scene or a pure rotation, epipole in the image).
+    """
+    if left.shape[:2] != right.shape[:2]:
+        raise InputError(f"the right image is {right.shape[1]}x{right.shape[0]}, the left {left.shape[1]}x"
+                         f"{left.shape[0]}")
+    h, w = left.shape[:2]
+    p1 = np.asarray(pts1, np.float64).reshape(-1, 2)
+    p2 = np.asarray(pts2, np.float64).reshape(-1, 2)
+    if calib is not None:
+        calib.check_size((w, h))
+    record: dict = {"matches": int(len(p1)), "calib": None if calib is None else calib.source}
+    if calib is not None and not calib.rectified:
+        rect = rectify.rectify_calibrated(calib, (w, h), p1, p2, margin=margin)
+        q1, q2 = rectify.apply_h(rect.H_left, p1), rectify.apply_h(rect.H_right, p2)
+        keep = np.abs(q1[:, 1] - q2[:, 1]) <= 2.0  # as rectify_calibrated (lens distortion left out here)
+        q1, q2 = q1[keep], q2[keep]
+        record["kind"] = "calibrated"
+        _vertical(record, rect.vertical_error, "matches within 2 px of one row after rectification")
+    elif rectify.looks_rectified(p1, p2, rectified_max_dy, rectified_share):
+        record.update(kind="none", H_left=np.eye(3).tolist(), H_right=np.eye(3).tolist(), shift_px=0.0)
+        dy = np.abs(p1[:, 1] - p2[:, 1])
+        _vertical(record, dy[dy <= 2.0], "matches within 2 px of one row (no rectification)")
+        record["depth"] = _geometry(None if calib is None else rectify.rectified_depth_geometry(calib))
+        return RectifiedPair(left, right, record, p1, p2)
+    else:
+        rect = rectify.rectify_uncalibrated(p1, p2, (w, h), threshold=threshold, margin=margin, calibration=calib,
+                                            rng=seed)
+        q1 = rectify.apply_h(rect.H_left, p1[rect.fit.inliers])
+        q2 = rectify.apply_h(rect.H_right, p2[rect.fit.inliers])
+        record.update(kind="uncalibrated", inliers=int(rect.fit.num_inliers))
+        _vertical(record, rect.vertical_error, "inlier matches of the fundamental matrix")
+    record.update(H_left=rect.H_left.tolist(), H_right=rect.H_right.tolist(), shift_px=float(rect.shift),
+                  depth=_geometry(rect.depth))
+    if len(rect.vertical_error):  # max_disp was estimated from the matches (else it is a default)
+        record.update(max_disp=int(rect.max_disp), disparity_range_px=[float(v) for v in rect.disparity_range])
+    lw, rw = rectify.warp_pair(left, right, rect)
+    return RectifiedPair(lw, rw, record, q1, q2)

@@ -1,0 +1,234 @@
+"""Disparity of a rectified stereo pair by our semi-global matching (the OpenCV baselines: :mod:`.opencv_baseline`).
+
+Conventions (DESIGN.md): ``left`` and ``right`` are rectified, both (H, W) grayscale or both (H, W, 3) BGR uint8
+images as ``cv2.imread`` returns them. A left pixel (x, y) with disparity d matches the right pixel (x - d, y).
+``max_disp`` is like OpenCV's ``numDisparities``: the disparities searched are 0 .. max_disp - 1. Every method
+returns an (H, W) float32 disparity of the LEFT image in pixels, NaN where it has no (trusted) estimate.
+
+``disparity_sgm`` follows Hirschmueller's semi-global matching (PAMI 2008): a census (optionally plus truncated
+absolute-difference) matching cost, cost aggregation along 8 (or 4) scanline directions with penalties P1 / P2 where
+P2 shrinks across intensity edges, winner-take-all with a uniqueness test, a parabola through the aggregated costs for
+sub-pixel disparity, a left-right consistency check on the same cost volume and removal of small speckles.
+All per-pixel work runs in the numba kernels of :mod:`._kernels` (``cache=True``; ``parallel=True`` where scanlines
+are independent), imported on the first call so that importing the package does not import numba.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from ..errors import check_memory
+
+#: most bits a census signature can hold (uint64)
+_CENSUS_BITS = 64
+#: supported numbers of aggregation directions (4: horizontal and vertical; 8: also the diagonals)
+_PATHS = (4, 8)
+
+
+# ----------------------------------------------------------------------------------------------- validation
+
+
+def _check_pair(left: np.ndarray, right: np.ndarray, max_disp: int) -> None:
+    """Validate a stereo pair and the disparity range at the public boundary (ValueError naming the parameter)."""
+    for name, img in (("left", left), ("right", right)):
+        if not isinstance(img, np.ndarray):
+            raise ValueError(f"`{name}` must be a numpy array, got {type(img).__name__}")
+        if img.dtype != np.uint8:
+            raise ValueError(f"`{name}` must be uint8, got {img.dtype}")
+        if not (img.ndim == 2 or (img.ndim == 3 and img.shape[2] == 3)):
+            raise ValueError(f"`{name}` must be (H, W) gray or (H, W, 3) BGR, got shape {img.shape}")
+    if left.ndim != right.ndim:
+        kinds = {2: "grayscale", 3: "BGR"}
+        raise ValueError(
+            f"`left` and `right` must both be grayscale or both BGR, got {kinds[left.ndim]} and {kinds[right.ndim]}"
+        )
+    if left.shape[:2] != right.shape[:2]:
+        raise ValueError(
+            f"`left` and `right` must have the same size, got {left.shape[1]}x{left.shape[0]} and "
+            f"{right.shape[1]}x{right.shape[0]}"
+        )
+    if isinstance(max_disp, (bool, np.bool_)) or not isinstance(max_disp, (int, np.integer)):
+        raise ValueError(f"`max_disp` must be an integer, got {max_disp!r}")
+    width = left.shape[1]
+    if max_disp <= 0 or max_disp >= width:
+        raise ValueError(f"`max_disp` must be in [1, {width - 1}] (positive and less than the image width), "
+                         f"got {max_disp}")
+
+
+def _gray(img: np.ndarray) -> np.ndarray:
+    return img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+
+
+# ----------------------------------------------------------------------------------------------- public API
+
+
+def disparity_sgm(
+    left: np.ndarray,
+    right: np.ndarray,
+    max_disp: int,
+    *,
+    census_size: tuple[int, int] = (5, 7),
+    ad_weight: float = 0.5,
+    ad_trunc: int = 20,
+    paths: int = 8,
+    p1: int = 15,
+    p2: int = 150,
+    p2_tau: float = 16.0,
+    uniqueness: float = 0.0,
+    subpixel: bool = True,
+    lr_max_diff: float = 2.0,
+    speckle_size: int = 100,
+    speckle_range: float = 2.0,
+    fill: bool = False,
+) -> np.ndarray:
+    """Disparity of the left image by semi-global matching on a census cost.
+
+    Parameters
+    ----------
+    left, right : ndarray, (H, W) or (H, W, 3) uint8
+        Rectified pair, both grayscale or both BGR; a left pixel (x, y) with disparity d matches right (x - d, y).
+    max_disp : int
+        Number of disparities searched, 0 .. max_disp - 1 (like OpenCV's ``numDisparities``); in [1, W - 1].
+    census_size : (int, int)
+        Odd (height, width) of the census window; at most 65 pixels so that a signature fits 64 bits.
+    ad_weight : float
+        Weight of the truncated mean absolute colour difference added to the census Hamming distance (0 = census
+        only). The cost of one disparity is ``hamming + floor(ad_weight * min(AD, ad_trunc))`` (fixed point), and
+        it must stay <= 255 (uint8 cost volume).
+    ad_trunc : int
+        Grey levels at which the absolute difference saturates, in [1, 255].
+    paths : {8, 4}
+        Number of aggregation directions; 4 (horizontal and vertical only) is faster.
+    p1, p2 : int
+        Penalties, in cost units (Hamming bits), for a disparity change of one pixel and of more than one pixel
+        between neighbours on a path; ``1 <= p1 < p2 <= 4096``.
+    p2_tau : float
+        Grey-level scale of the edge adaptation ``P2' = max(P2 * tau / (tau + |dI|), P1 + 1)``; 0 keeps P2 fixed.
+    uniqueness : float
+        Reject a pixel when another disparity (not adjacent to the winner) costs less than ``(1 + uniqueness)``
+        times the winner's aggregated cost; 0 disables the test.
+    subpixel : bool
+        Refine the winner with a parabola through the aggregated costs at d - 1, d, d + 1.
+    lr_max_diff : float
+        Largest accepted difference, in pixels, between the left disparity and the right image's disparity at
+        the matched pixel (the floor and the ceil of a sub-pixel disparity are both tried); negative disables the
+        left-right check.
+    speckle_size : int
+        Connected regions with fewer pixels than this are rejected (0 disables speckle removal).
+    speckle_range : float
+        Largest disparity step, in pixels, between 4-neighbours of one region.
+    fill : bool
+        Fill rejected pixels with the smaller (background) of the nearest accepted disparities on the same row.
+        Off by default: the map then has NaN wherever the estimate is not trusted.
+
+    Returns
+    -------
+    ndarray, (H, W) float32
+        Disparity of the left image in pixels, NaN where rejected (occluded, ambiguous, inconsistent, speckle, or
+        ``x < d`` for every candidate).
+
+    Raises
+    ------
+    ValueError
+        Bad images (different sizes, gray mixed with colour, not uint8) or a parameter out of range.
+    """
+    from ._kernels import _aggregate, _cost_volume, _fill_background, _remove_speckles, _winner
+
+    _check_pair(left, right, max_disp)
+    if len(census_size) != 2 or any(int(s) != s or s < 1 or s % 2 == 0 for s in census_size):
+        raise ValueError(f"`census_size` must be two odd positive integers (height, width), got {census_size}")
+    if census_size[0] * census_size[1] - 1 > _CENSUS_BITS:
+        raise ValueError(f"`census_size` must cover at most {_CENSUS_BITS + 1} pixels, got {census_size}")
+    if not ad_weight >= 0:
+        raise ValueError(f"`ad_weight` must be >= 0, got {ad_weight}")
+    if not 1 <= ad_trunc <= 255:
+        raise ValueError(f"`ad_trunc` must be in [1, 255], got {ad_trunc}")
+    if paths not in _PATHS:
+        raise ValueError(f"`paths` must be one of {sorted(_PATHS)}, got {paths!r}")
+    if not 1 <= p1 < p2:
+        raise ValueError(f"`p1` and `p2` must satisfy 1 <= p1 < p2, got p1={p1}, p2={p2}")
+    if p2 > 4096:
+        raise ValueError(f"`p2` must be at most 4096, got {p2}")
+    if not p2_tau >= 0:
+        raise ValueError(f"`p2_tau` must be >= 0, got {p2_tau}")
+    if not 0 <= uniqueness < 1:
+        raise ValueError(f"`uniqueness` must be in [0, 1), got {uniqueness}")
+    if speckle_size < 0:
+        raise ValueError(f"`speckle_size` must be >= 0, got {speckle_size}")
+    if not speckle_range >= 0:
+        raise ValueError(f"`speckle_range` must be >= 0, got {speckle_range}")
+
+    h, w = left.shape[:2]
+    # cost (uint8) + the two aggregated volumes (uint16) per pixel and disparity, and ~40 bytes per pixel of
+    # disparity maps and speckle buffers: checked before anything is allocated
+    check_memory(float(h) * w * (5 * int(max_disp) + 40), f"semi-global matching of {w}x{h} pixels x {max_disp} "
+                 "disparities", "lower `--max-disp` or downscale both images (disparities scale with the image)")
+    gl, gr = _gray(left), _gray(right)
+    planes_l = np.ascontiguousarray(left).reshape(left.shape[0], left.shape[1], -1)  # (H, W, C) views, no copy
+    planes_r = np.ascontiguousarray(right).reshape(right.shape[0], right.shape[1], -1)
+    ry, rx = census_size[0] // 2, census_size[1] // 2
+    nch = 1 if left.ndim == 2 else 3
+    # AD term = ad_weight * min(mean_c |dI_c|, ad_trunc) in 16.16 fixed point on the channel sum
+    ad_mult = int(round(ad_weight / nch * 65536))
+    ad_cap = int(ad_trunc) * nch
+    ad_max = (ad_cap * ad_mult) >> 16
+    bits = census_size[0] * census_size[1] - 1
+    c_max = bits + ad_max
+    # the cost volume is uint8; then every path cost is below 255 + p2 <= 4351 (int16 buffers, _BIG = 16000) and
+    # the sum of 8 paths below 65535 (uint16 volumes)
+    if c_max > 255:
+        raise ValueError(f"`ad_weight` * `ad_trunc` too large: the matching cost {bits} + {ad_max} "
+                         "must stay <= 255")
+    gl_pad = np.pad(gl, ((ry, ry), (rx, rx)), mode="edge")
+    gr_pad = np.pad(gr, ((ry, ry), (rx, rx)), mode="edge")
+    # the volumes are allocated by numpy, which asks the kernel for huge pages (numba's allocator does not): with
+    # 4 KiB pages, first-touch page faults on the tens of MB of volumes cost a sizeable share of the run time
+    h, w = gl.shape
+    cost = np.empty((h, w, int(max_disp)), np.uint8)
+    _cost_volume(gl_pad, gr_pad, ry, rx, planes_l, planes_r, np.int32(ad_cap), np.int32(ad_mult), np.uint8(c_max),
+                 cost)
+    steps = np.arange(256, dtype=np.float64)
+    p2_lut = np.full(256, p2, np.float64) if p2_tau == 0 else np.floor(p2 * p2_tau / (p2_tau + steps))
+    p2_lut = np.maximum(p2_lut, p1 + 1).astype(np.int16)
+    down = np.empty(cost.shape, np.uint16)
+    up = np.empty(cost.shape, np.uint16)
+    _aggregate(cost, gl, 3 if paths == 8 else 1, np.int16(p1), p2_lut, down, up)
+    # the left-right check runs row by row inside _winner (a negative lr_max_diff disables it)
+    disp, _ = _winner(cost, down, up, gl, np.int16(p1), p2_lut, float(uniqueness), bool(subpixel),
+                      float(lr_max_diff))
+    del cost, down, up
+    if speckle_size > 0:
+        _remove_speckles(disp, int(speckle_size), float(speckle_range))
+    if fill:
+        disp = _fill_background(disp)
+    disp[disp < 0] = np.nan
+    return disp
+
+
+def fill_invalid(disp: np.ndarray) -> np.ndarray:
+    """Fill NaN pixels with the smaller (background) of the nearest valid disparities on the same row.
+
+    The occlusion filling of Hirschmueller (2008): a pixel rejected by the left-right check is most often occluded,
+    and occluded pixels belong to the farther surface. Rows without any valid pixel stay NaN.
+
+    Parameters
+    ----------
+    disp : ndarray, (H, W) float
+        Disparity in pixels, NaN = invalid; values must be >= 0.
+
+    Returns
+    -------
+    ndarray, (H, W) float32
+        A filled copy.
+    """
+    from ._kernels import _fill_background
+
+    if disp.ndim != 2:
+        raise ValueError(f"`disp` must be (H, W), got shape {disp.shape}")
+    work = np.where(np.isfinite(disp), disp, -1.0).astype(np.float32)
+    if (work[np.isfinite(disp)] < 0).any():
+        raise ValueError("`disp` must not contain negative disparities")
+    out = _fill_background(work)
+    out[out < 0] = np.nan
+    return out
