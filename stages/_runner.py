@@ -36,6 +36,10 @@ from cvpipe.params import SECTIONS, load_section
 
 T = TypeVar("T")
 
+#: the path arguments every report stage takes (its summary for the page, its dvc plots folder, its metrics file)
+REPORT_ARGS = {"summary": "summary JSON for the report page", "plots": "folder for dvc plots data",
+               "metrics": "metrics JSON (git-tracked)"}
+
 #: where the uncached timing files go (relative to the repository root, where DVC runs every stage)
 TIMINGS_DIR = Path("outputs/timings")
 #: overrides ``compute.scheduler`` of the params file for the stages that fan out (:meth:`Stage.map`)

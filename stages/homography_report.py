@@ -5,7 +5,7 @@ quality plots."""
 from pathlib import Path
 
 from cvpipe import datasets, homography, io
-from stages._runner import Stage, run
+from stages._runner import REPORT_ARGS, Stage, run
 
 
 def homography_report(st: Stage) -> None:
@@ -42,5 +42,4 @@ if __name__ == "__main__":
     run(homography_report, section="homography.report",
         args={"images": "the homography.data folder", "matches": "homography_match output (its dropped.json)",
               "estimates": "+homography_estimate output folders, one per method", "out": "folder for the pictures",
-              "metrics": "metrics JSON (git-tracked)", "summary": "summary JSON for the report page",
-              "plots": "folder for dvc plots data"})
+              **REPORT_ARGS})

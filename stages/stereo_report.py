@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from cvpipe import datasets, io, stereo
-from stages._runner import Stage, run
+from stages._runner import REPORT_ARGS, Stage, run
 from stages.stereo_disparity import read_truth
 
 
@@ -59,18 +59,13 @@ def stereo_report(st: Stage) -> None:
     dropped = rect_run["dropped"] + stereo.merge_dropped(runs) + depth_run["dropped"]
     summary = stereo.report_summary(runs, pictures, dropped, p.error_clip)
     with_truth = tuple(q.name for q in pairs if q.truth is not None)
-    io.save_json(a.summary, stereo.extend_summary(summary, rects, depth_run, extra, with_truth))
-    for name, rows in stereo.quality_plots(runs).items():
-        io.save_json(Path(a.plots) / f"{name}.json", rows)
-    io.save_json(Path(a.plots) / "vertical_error.json", stereo.vertical_error_plot(rects))
+    plots = {**stereo.quality_plots(runs), "vertical_error": stereo.vertical_error_plot(rects)}
+    st.write_report(stereo.extend_summary(summary, rects, depth_run, extra, with_truth), None, plots, dropped)
     st.made(f"{len(pictures)} pairs compared over {len(runs)} methods, pictures in {out}")
-    for d in dropped:
-        st.drop(d["item"], d["reason"])
 
 
 if __name__ == "__main__":
     run(stereo_report, section="stereo.report",
         args={"pairs": "the stereo.data folder", "rectified": "stereo_rectify's output folder",
               "disparities": "+stereo_disparity output folders, one per method", "depth": "stereo_depth's folder",
-              "out": "folder for the pictures", "summary": "summary JSON for the report page",
-              "plots": "folder for dvc plots data"})
+              "out": "folder for the pictures", **{k: v for k, v in REPORT_ARGS.items() if k != "metrics"}})
