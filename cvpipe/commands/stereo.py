@@ -9,7 +9,7 @@ import sys
 from typing import TYPE_CHECKING
 
 from ..params import StereoBmParams, StereoSgbmParams, StereoSgmParams
-from . import compile_note, step
+from . import compile_note, note, step
 
 if TYPE_CHECKING:
     import numpy as np
@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
                 tmp.write_bytes(data)
             out["points"] = int(len(xyz))
     if "note" in out:  # after the work, so that a failure stays a single line on stderr
-        print(f"cvpipe: note: {out['note']}", file=sys.stderr)
+        note(f"note: {out['note']}")
     if args.json:
         print(io.dumps_json(out))
     return 0
