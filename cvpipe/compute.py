@@ -205,12 +205,13 @@ def cluster(scheduler: str, workers: int | None = None, *, timeout: float = CONN
     from distributed import Client, LocalCluster
 
     if s == "local":
-        env = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}), **WORKER_ENV)
-        with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
-            # no dashboard, and the scheduler's HTTP endpoints on a free port rather than 8787 (may be taken)
-            local = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                                 silence_logs=logging.ERROR, dashboard_address=None,
-                                 scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"})
+        # the nanny's `env` is set inside each worker process, before it imports numba; `pre-spawn-environ` would
+        # be written into this process's own os.environ too, and a later numba call here would then refuse to run
+        # ("Cannot set NUMBA_NUM_THREADS to a different value once the threads have been launched")
+        # no dashboard, and the scheduler's HTTP endpoints on a free port rather than 8787 (may be taken)
+        local = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                             silence_logs=logging.ERROR, dashboard_address=None, env=dict(WORKER_ENV),
+                             scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"})
         try:
             with Client(local) as client:
                 yield client

@@ -397,6 +397,21 @@ def register_item(item: tuple, shared: tuple) -> dict:
     ------
     InputError, EstimationError
         As :func:`register_probe` (the stage drops the probe with the reason).
+
+    Examples
+    --------
+    >>> from cvpipe.features import detect
+    >>> from cvpipe.io import to_gray
+    >>> from cvpipe.matching import match
+    >>> from cvpipe.params import DefectRegisterParams
+    >>> from cvpipe.samples import make_defect
+    >>> board = make_defect(np.random.default_rng(0), n_faulty=2, n_perfect=1, size=240)
+    >>> ref, prb = to_gray(board.images["reference.png"]), to_gray(board.images["probes/probe_02.png"])
+    >>> fr, fq = detect(ref, "orb", 1000), detect(prb, "orb", 1000)
+    >>> out = register_item((prb, fq, match(fr.descriptors, fq.descriptors, 0.8, False, fr.binary)),
+    ...                     (ref, fr, DefectRegisterParams()))
+    >>> out["primary"].method, out["arrays"]["warped"].shape == ref.shape
+    ('features', True)
     """
     import time
 
