@@ -303,9 +303,13 @@ def _cluster_gen(fn, items, scheduler, workers, shared, with_shared, window, ret
 
 
 def _windowed(client, fn, items, shared, with_shared, window, retries, progress, total) -> Iterator[ItemResult]:
-    """Keep at most ``window`` items between submission and yield; yield in input order."""
-    from distributed import as_completed
+    """Keep at most ``window`` items between submission and yield; yield in input order.
 
+    Completion is polled with ``distributed.wait(..., return_when="FIRST_COMPLETED")`` in short rounds rather than
+    through ``as_completed``: the latter's background coroutine can die inside the client's event loop (seen as a
+    tornado ``AssertionError`` under load) and leave the iteration waiting for ever. Each round also checks that the
+    client is still connected, so a scheduler that goes away ends the run with :class:`ComputeError`, not a hang.
+    """
     if window is None:
         nthreads = sum(client.nthreads().values()) or 1
         window = 4 * nthreads
@@ -318,8 +322,6 @@ def _windowed(client, fn, items, shared, with_shared, window, retries, progress,
     next_yield = 0
     next_submit = 0
     exhausted = False
-    # results travel with the completion notice (one round trip per item, not two)
-    ac = as_completed(with_results=True, raise_errors=False)
 
     def submit(batch: list[tuple[int, Any, int]]) -> None:
         # the items' data goes straight to the workers (one scatter per batch). Embedded in the tasks, it went
@@ -329,7 +331,6 @@ def _windowed(client, fn, items, shared, with_shared, window, retries, progress,
             fut = client.submit(_run_one, fn, data, shared_arg, with_shared, key=f"{run_id}-{index}-{attempt}",
                                 pure=False)
             pending[fut] = (index, item, attempt, data)
-            ac.add(fut)
 
     refill = max(1, window // 4)  # scatter in batches: fewer round trips, the window stays nearly full
     try:
@@ -345,23 +346,27 @@ def _windowed(client, fn, items, shared, with_shared, window, retries, progress,
                     next_submit += len(batch)
             if not pending and next_yield == next_submit:
                 break
-            fut, outcome = next(ac)
-            index, item, attempt, data = pending.pop(fut)
-            data.release()
-            lost = isinstance(outcome, BaseException) or fut.status != "finished"
-            fut.release()
-            if lost:
-                # the task itself failed (its worker died and the scheduler gave up on it, or it was cancelled)
-                if attempt <= retries:
-                    submit([(index, item, attempt + 1)])
-                    continue
-                done[index] = ItemResult(index, None, f"lost after {attempt} attempts: {outcome}",
-                                         type(outcome).__name__, attempt)
-            else:
-                ok, value, etype = outcome
-                done[index] = (ItemResult(index, value, None, None, attempt) if ok
-                               else ItemResult(index, None, value, etype, attempt))
-            del item
+            finished = _wait_some(client, list(pending))
+            # one round trip for all the results of this round; a failed task's future gives its exception
+            ok_futs = [f for f in finished if f.status == "finished"]
+            values = dict(zip(ok_futs, client.gather(ok_futs))) if ok_futs else {}
+            for fut in finished:
+                index, item, attempt, data = pending.pop(fut)
+                data.release()
+                if fut in values:
+                    ok, value, etype = values[fut]
+                    done[index] = (ItemResult(index, value, None, None, attempt) if ok
+                                   else ItemResult(index, None, value, etype, attempt))
+                else:
+                    # the task itself failed (its worker died and the scheduler gave up on it, or it was cancelled)
+                    outcome = _task_failure(fut)
+                    if attempt <= retries:
+                        fut.release()
+                        submit([(index, item, attempt + 1)])
+                        continue
+                    done[index] = ItemResult(index, None, f"lost after {attempt} attempts: {outcome}",
+                                             type(outcome).__name__, attempt)
+                fut.release()
             while next_yield in done:
                 yield done.pop(next_yield)
                 next_yield += 1
@@ -373,3 +378,40 @@ def _windowed(client, fn, items, shared, with_shared, window, retries, progress,
         if shared_arg is not None:
             shared_arg.release()
         close()
+
+
+#: seconds of one completion poll; between polls the client's connection is checked
+POLL = 5.0
+
+
+def _wait_some(client, futures: list) -> list:
+    """The futures of ``futures`` that have finished (at least one), waiting in rounds of :data:`POLL` seconds.
+
+    Raises
+    ------
+    ComputeError
+        The client lost its scheduler while waiting.
+    """
+    from distributed import wait
+
+    while True:
+        try:
+            wait(futures, timeout=POLL, return_when="FIRST_COMPLETED")
+        except TimeoutError:
+            pass
+        except Exception:  # noqa: BLE001 - recent versions raise when a future was cancelled (its data was lost
+            pass  # with a worker); that future is finished for us, and is resubmitted by the caller
+        finished = [f for f in futures if f.status != "pending"]
+        if finished:
+            return finished
+        if client.status not in ("running", "connecting"):
+            raise ComputeError(f"lost the Dask scheduler while waiting for results (client {client.status})")
+
+
+def _task_failure(fut) -> BaseException:
+    """The exception a failed or cancelled task ended with (never raises itself)."""
+    try:
+        exc = fut.exception(timeout=POLL)
+    except BaseException as err:  # noqa: BLE001 - a cancelled future raises CancelledError here
+        return err
+    return exc if exc is not None else RuntimeError(f"task {fut.status}")

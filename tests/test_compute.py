@@ -23,6 +23,8 @@ from cvpipe.params import ComputeParams, from_mapping
 from test_defects import board, make_probe, motion
 from test_logos import PERSP, _scene, _view, gallery_dir, marks  # noqa: F401 - fixtures used below
 
+pytestmark = pytest.mark.timeout(600)  # a cluster run that stalls fails here, not after the suite-wide 1500 s
+
 
 # ----------------------------------------------------------------------------- item functions (module level: picklable)
 
