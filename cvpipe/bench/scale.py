@@ -8,8 +8,10 @@ their keypoints are scattered once per worker.
 
 Every configuration runs in a fresh interpreter, so that its peak memory (``ru_maxrss``) is its own: serial in
 process (numba and OpenCV with their own threads), ``LocalCluster`` with 1 and with 2 single-threaded workers, and an
-external ``dask scheduler`` with 2 ``dask worker --nthreads 1`` processes on 127.0.0.1. The results of every mode
-are hashed and must agree. The scheduler's per-item overhead is the latency of an empty task, submitted one at a
+external ``dask scheduler`` with 2 ``dask worker --nthreads 1`` processes on 127.0.0.1, and ``kill2``: its own
+external cluster of 2 workers of which one is killed (SIGKILL) when half of the probes are done, so that the time a
+lost worker costs shows against ``external2`` and ``local1`` (what the rest of the run would take on one worker).
+The results of every mode are hashed and must agree. The scheduler's per-item overhead is the latency of an empty task, submitted one at a
 time (median and p95), and the rate of empty tasks through :func:`cvpipe.compute.map_items`.
 """
 
@@ -40,7 +42,7 @@ from .. import defect as defects
 HELP = "inspection throughput serial vs a Dask LocalCluster vs an external Dask cluster (probes/s, overhead, memory)"
 EXAMPLE = "cvpipe bench scale --data ../shared/data --max-items 200"
 
-MODES = ("serial", "local1", "local2", "external2")
+MODES = ("serial", "local1", "local2", "external2", "kill2")
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -190,8 +192,16 @@ def measure(mode: str, n: int, data: str, seed: int, address: str = "", overhead
     pairs, templates, tests = _load(data)
     refs = References(templates, defects.InspectParams())
     t0 = time.perf_counter()
+    victim = None
     if mode == "serial":
         ctx = contextlib.nullcontext(None)
+    elif mode == "kill2":
+        from distributed import Client
+
+        stack = contextlib.ExitStack()
+        ext = stack.enter_context(external_cluster(2))
+        victim = ext.workers[0]
+        ctx = _kill_context(stack, Client(ext.address))
     else:
         from ..compute import cluster
 
@@ -209,6 +219,10 @@ def measure(mode: str, n: int, data: str, seed: int, address: str = "", overhead
         results = map_items(inspect_item, stream(pairs, templates, tests, n, seed), shared=refs, client=client,
                             total=n, progress=f"scale {mode}")
         for r in results:
+            if victim is not None and r.index + 1 == n // 2:
+                victim.kill()  # SIGKILL: no goodbye to the scheduler, its items in flight are lost
+                victim.wait(timeout=10)
+                out["killed_after_s"] = time.perf_counter() - t0
             errors += not r.ok
             digest.update(json.dumps([r.index, r.value, r.error]).encode())
         wall = time.perf_counter() - t0
@@ -229,6 +243,16 @@ def measure(mode: str, n: int, data: str, seed: int, address: str = "", overhead
             out["empty_tasks_per_s"] = m / (time.perf_counter() - t)
     out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     return out
+
+
+@contextlib.contextmanager
+def _kill_context(stack: contextlib.ExitStack, client):
+    """Yield ``client``, then close it and the cluster that ``stack`` holds."""
+    with stack:
+        try:
+            yield client
+        finally:
+            client.close()
 
 
 def _child(argv_json: str) -> None:
@@ -283,6 +307,12 @@ def run(args: argparse.Namespace) -> int:
                 r["speedup_vs_serial"] = r["probes_per_s"] / base["probes_per_s"] if base else None
                 r["speedup_vs_local1"] = r["probes_per_s"] / one["probes_per_s"] if one else None
                 r["identical_results"] = len(digests) == 1
+        ext2 = next((r for r in rows if r["probes"] == n and r["mode"] == "external2" and "error" not in r), None)
+        for r in rows:
+            if r["probes"] == n and r["mode"] == "kill2" and "error" not in r and ext2 and one:
+                # no loss: the first half at the two-worker rate, the rest at the one-worker rate
+                r["expected_without_loss_s"] = (n // 2) / ext2["probes_per_s"] + (n - n // 2) / one["probes_per_s"]
+                r["cost_of_the_kill_s"] = r["wall_s"] - r["expected_without_loss_s"]
     res = {"sizes": sizes, "modes": modes, "cpu_count": os.cpu_count(), "load_average": list(os.getloadavg()),
            "rows": rows}
     if args.out:
@@ -303,4 +333,9 @@ def run(args: argparse.Namespace) -> int:
               f"{f('speedup_vs_local1', '8.2f')} {f('empty_task_median_ms', '9.2f')} "
               f"{f('empty_task_p95_ms', '7.2f')} {f('empty_tasks_per_s', '8.0f')} {r['peak_rss_mb']:8.0f} "
               f"{'yes' if r['identical_results'] else 'NO':>5} {r['errors']:4d}")
+    for r in rows:
+        if r.get("cost_of_the_kill_s") is not None:
+            print(f"kill2 {r['probes']}: one of 2 workers killed after {r['killed_after_s']:.1f} s; run {r['wall_s']:.1f} s "
+                  f"against {r['expected_without_loss_s']:.1f} s expected with no loss (first half at external2's "
+                  f"rate, the rest at local1's): the kill cost {r['cost_of_the_kill_s']:+.1f} s")
     return 0
