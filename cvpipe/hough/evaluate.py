@@ -24,6 +24,11 @@ def _as_lines(lines: np.ndarray) -> np.ndarray:
     return arr
 
 
+def _as_segments(segments: np.ndarray) -> np.ndarray:
+    """``segments`` as a float64 (M, 4) array ``[x1, y1, x2, y2]``."""
+    return np.asarray(segments, np.float64).reshape(-1, 4)
+
+
 def line_cells(lines: np.ndarray, rho: float = 1.0, theta: float = np.pi / 180, min_theta: float = 0.0) -> np.ndarray:
     """Accumulator cell (angle index, rho index relative to rho = 0) of each line, shape (N, 2) int64.
 
@@ -108,6 +113,7 @@ def line_segment_matches(lines: np.ndarray, segments: np.ndarray, dist_px: float
     Returns
     -------
     ndarray, shape (M,), bool
+        True where some line passes along the segment.
 
     Examples
     --------
@@ -115,10 +121,7 @@ def line_segment_matches(lines: np.ndarray, segments: np.ndarray, dist_px: float
     >>> line_segment_matches([[20.0, np.pi / 2]], [[0, 20, 79, 20], [5, 0, 5, 59]]).tolist()  # the row y = 20
     [True, False]
     """
-    segments = np.asarray(segments, np.float64).reshape(-1, 4)
-    lines = np.asarray(lines, np.float64)
-    if len(lines) == 0 or len(segments) == 0:
-        return np.zeros(len(segments), bool)
+    lines, segments = _as_lines(lines), _as_segments(segments)
     rho, th = lines[:, 0][:, None], lines[:, 1][:, None]
     return _along(np.cos(th), np.sin(th), rho, th + np.pi / 2, segments, dist_px, angle_deg).any(axis=0)
 
@@ -139,16 +142,14 @@ def segment_segment_matches(found: np.ndarray, segments: np.ndarray, dist_px: fl
     Returns
     -------
     ndarray, shape (M,), bool
+        True where some detected segment covers the ground-truth segment.
 
     Examples
     --------
     >>> segment_segment_matches([[0, 20, 79, 20]], [[10, 20, 60, 20], [5, 0, 5, 59]]).tolist()
     [True, False]
     """
-    segments = np.asarray(segments, np.float64).reshape(-1, 4)
-    found = np.asarray(found, np.float64).reshape(-1, 4)
-    if len(found) == 0 or len(segments) == 0:
-        return np.zeros(len(segments), bool)
+    found, segments = _as_segments(found), _as_segments(segments)
     fdx, fdy = found[:, 2] - found[:, 0], found[:, 3] - found[:, 1]
     flen = np.hypot(fdx, fdy)
     flen = np.where(flen > 0, flen, 1.0)
@@ -276,13 +277,9 @@ def metrics_of(compared: dict) -> dict:
 
     Examples
     --------
-    >>> import numpy as np
-    >>> run = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
-    ...        "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
-    >>> compared = compare_runs(run, run, {"a": [[20.0, np.pi / 2], [5.0, 0.0]]})
-    >>> m = metrics_of(compared)["hough"]
-    >>> sorted(m), m["a"]["identical"], m["all"]["recall_opencv"]
-    (['a', 'all'], 1, 0.5)
+    >>> compared = {"images": 1, "parity_min": 1.0, "per_image": [{"file": "a", "parity": 1.0, "identical": True}]}
+    >>> metrics_of(compared)  # the summary under "all", each image under its name, booleans as 0/1
+    {'hough': {'all': {'images': 1, 'parity_min': 1.0}, 'a': {'parity': 1.0, 'identical': 1}}}
     """
     summary = {k: v for k, v in compared.items() if k != "per_image"}
     per_image = {r["file"]: {k: (int(v) if isinstance(v, bool) else v) for k, v in r.items() if k != "file"}
