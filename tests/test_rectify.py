@@ -9,21 +9,10 @@ from cvpipe import geometry
 from cvpipe.stereo import calibration, rectify
 from cvpipe.errors import EstimationError, InputError
 
+from cameras import project, rotation
+
 W, H = 640, 480
 K = np.array([[600.0, 0.0, 319.5], [0.0, 600.0, 239.5], [0.0, 0.0, 1.0]])
-
-
-def rotation(ax, ay, az):
-    cx, sx, cy, sy, cz, sz = np.cos(ax), np.sin(ax), np.cos(ay), np.sin(ay), np.cos(az), np.sin(az)
-    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    Rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
-    return Rz @ Ry @ Rx
-
-
-def project(X, K_, R=np.eye(3), t=np.zeros(3)):
-    x = (X @ R.T + t) @ K_.T
-    return x[:, :2] / x[:, 2:]
 
 
 def points(n, seed):
