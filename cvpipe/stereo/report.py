@@ -228,9 +228,7 @@ def report_summary(runs: dict, pictures: list[dict], dropped: list[dict], error_
         {"title": "Per pair", "columns": ["pair", "method", "max_disp", "valid %", "bad-2.0 %", "mean error px"],
          "rows": per_pair},
     ]
-    if dropped:
-        tables.append({"title": "Not processed", "columns": ["input", "reason"],
-                       "rows": [[d["item"], d["reason"]] for d in dropped]})
+    tables += metrics.not_processed_table(dropped)
     if truth_pairs:
         truth_note = (f"{len(truth_pairs)} of {len(names)} pairs have a true disparity ({', '.join(truth_pairs)}). "
                       "A pixel is bad when its estimate is missing or off by more than the threshold, over all pixels "
