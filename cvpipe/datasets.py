@@ -52,18 +52,24 @@ def _drop(dropped: list[dict], item: Path | str, reason: str) -> None:
     dropped.append({"item": str(item), "reason": reason})
 
 
-def _truth(folder: Path, key: str) -> tuple[Path, list[dict]] | None:
-    """The records under ``key`` of ``folder/truth.json``, or None when there is no truth file."""
+def _truth(folder: Path, key: str) -> list[tuple[Path, str, dict]]:
+    """``(truth file, "key[i]", record)`` for each record under ``key`` of ``folder/truth.json`` (the middle item
+    names the record in messages); none when there is no truth file."""
     path = folder / TRUTH_FILE
     if not path.is_file():
-        return None
+        return []
     data = load_json(path)
     if not isinstance(data, dict) or not isinstance(data.get(key), list):
         raise InputError(f"{path}: field `{key}` must be a list of records")
     for i, rec in enumerate(data[key]):
         if not isinstance(rec, dict):
             raise InputError(f"{path}: field `{key}[{i}]` must be an object")
-    return path, data[key]
+    return [(path, f"{key}[{i}]", rec) for i, rec in enumerate(data[key])]
+
+
+def _file_name(path: Path, rec: dict, where: str) -> str:
+    """The bare file name in the record's ``file`` field (a truth file may list ``probes/x.png``)."""
+    return Path(str(_field(path, rec, where, "file"))).name
 
 
 def _field(path: Path, rec: dict, where: str, name: str, shape: tuple[int, ...] | None = None) -> Any:
@@ -97,13 +103,10 @@ def find_hough(folder: str | os.PathLike) -> tuple[list[HoughImage], list[dict]]
     """The images of ``folder``, each with its true lines when ``truth.json`` lists it."""
     d = _folder(folder, "hough")
     truth: dict[str, np.ndarray] = {}
-    found = _truth(d, "images")
-    if found:
-        path, recs = found
-        for i, rec in enumerate(recs):
-            lines = np.asarray(_field(path, rec, f"images[{i}]", "lines"), dtype=float).reshape(-1, 2) \
-                if rec.get("lines") is not None else np.zeros((0, 2))
-            truth[str(_field(path, rec, f"images[{i}]", "file"))] = lines
+    for path, where, rec in _truth(d, "images"):
+        lines = np.asarray(_field(path, rec, where, "lines"), dtype=float).reshape(-1, 2) \
+            if rec.get("lines") is not None else np.zeros((0, 2))
+        truth[str(_field(path, rec, where, "file"))] = lines
     items = [HoughImage(f.stem, f, truth.get(f.name)) for f in images_in(d)]
     return _unique(items, "hough"), []
 
@@ -145,11 +148,9 @@ def find_homography(folder: str | os.PathLike) -> tuple[list[ImagePair], list[di
             _drop(dropped, sub.name, f"a pair folder must hold exactly 2 images, found {len(imgs)}")
             continue
         pairs.append(ImagePair(sub.name, imgs[0], imgs[1]))
-    found = _truth(d, "pairs")
-    if found:
-        path, recs = found
-        truth = {str(_field(path, r, f"pairs[{i}]", "name")): _field(path, r, f"pairs[{i}]", "H", (3, 3))
-                 for i, r in enumerate(recs)}
+    truth = {str(_field(path, r, where, "name")): _field(path, r, where, "H", (3, 3))
+             for path, where, r in _truth(d, "pairs")}
+    if truth:
         pairs = [ImagePair(p.name, p.a, p.b, truth.get(p.name)) for p in pairs]
     return _unique(pairs, "homography"), dropped
 
@@ -182,17 +183,13 @@ def find_defect(folder: str | os.PathLike) -> tuple[DefectInputs, list[dict]]:
     if not probes_dir.is_dir():
         raise InputError(f"{probes_dir}: no such folder (the probes to inspect go there)")
     truth: dict[str, dict] = {}
-    found = _truth(d, "probes")
-    if found:
-        path, recs = found
-        for i, r in enumerate(recs):
-            where = f"probes[{i}]"
-            verdict = _field(path, r, where, "verdict")
-            if verdict not in ("faulty", "perfect"):
-                raise InputError(f"{path}: field `{where}.verdict` must be 'faulty' or 'perfect', got {verdict!r}")
-            boxes = np.asarray(r.get("boxes") or np.zeros((0, 4)), dtype=float).reshape(-1, 4)
-            H = _field(path, r, where, "H", (3, 3)) if "H" in r else None
-            truth[Path(str(_field(path, r, where, "file"))).name] = dict(verdict=verdict, boxes=boxes, H=H)
+    for path, where, r in _truth(d, "probes"):
+        verdict = _field(path, r, where, "verdict")
+        if verdict not in ("faulty", "perfect"):
+            raise InputError(f"{path}: field `{where}.verdict` must be 'faulty' or 'perfect', got {verdict!r}")
+        boxes = np.asarray(r.get("boxes") or np.zeros((0, 4)), dtype=float).reshape(-1, 4)
+        H = _field(path, r, where, "H", (3, 3)) if "H" in r else None
+        truth[_file_name(path, r, where)] = dict(verdict=verdict, boxes=boxes, H=H)
     probes = [Probe(f.stem, f, **truth.get(f.name, {})) for f in images_in(probes_dir)]
     dropped: list[dict] = []
     if not probes:
@@ -247,16 +244,12 @@ def find_logo(folder: str | os.PathLike) -> tuple[LogoInputs, list[dict]]:
     if not gallery:
         raise InputError(f"{gdir}: no gallery images (one image per brand, named after the brand)")
     truth: dict[str, dict] = {}
-    found = _truth(d, "scenes")
-    if found:
-        path, recs = found
-        for i, r in enumerate(recs):
-            where = f"scenes[{i}]"
-            brand = _field(path, r, where, "brand")
-            if brand is not None and brand not in gallery:
-                raise InputError(f"{path}: field `{where}.brand` is {brand!r}, which is not a gallery brand")
-            quad = _field(path, r, where, "quad", (4, 2)) if r.get("quad") is not None else None
-            truth[Path(str(_field(path, r, where, "file"))).name] = dict(brand=brand, quad=quad, labelled=True)
+    for path, where, r in _truth(d, "scenes"):
+        brand = _field(path, r, where, "brand")
+        if brand is not None and brand not in gallery:
+            raise InputError(f"{path}: field `{where}.brand` is {brand!r}, which is not a gallery brand")
+        quad = _field(path, r, where, "quad", (4, 2)) if r.get("quad") is not None else None
+        truth[_file_name(path, r, where)] = dict(brand=brand, quad=quad, labelled=True)
     scenes = [Scene(f.stem, f, **truth.get(f.name, {})) for f in images_in(sdir)]
     if not scenes:
         raise InputError(f"{sdir}: no scene images found")
@@ -342,19 +335,15 @@ def find_panorama(folder: str | os.PathLike) -> tuple[list[PanoramaSet], list[di
     d = _folder(folder, "panorama")
     dropped: list[dict] = []
     truth: dict[str, dict[str, np.ndarray]] = {}
-    found = _truth(d, "sets")
-    if found:
-        path, recs = found
-        for i, r in enumerate(recs):
-            where = f"sets[{i}]"
-            names = _field(path, r, where, "images")
-            Hs = _field(path, r, where, "H")
-            if not isinstance(names, list) or not isinstance(Hs, list) or len(names) != len(Hs):
-                raise InputError(f"{path}: fields `{where}.images` and `{where}.H` must be lists of equal length")
-            truth[str(_field(path, r, where, "name"))] = {
-                Path(str(n)).name: _field(path, {f"H[{k}]": h}, where, f"H[{k}]", (3, 3))
-                for k, (n, h) in enumerate(zip(names, Hs))
-            }
+    for path, where, r in _truth(d, "sets"):
+        names = _field(path, r, where, "images")
+        Hs = _field(path, r, where, "H")
+        if not isinstance(names, list) or not isinstance(Hs, list) or len(names) != len(Hs):
+            raise InputError(f"{path}: fields `{where}.images` and `{where}.H` must be lists of equal length")
+        truth[str(_field(path, r, where, "name"))] = {
+            Path(str(n)).name: _field(path, {f"H[{k}]": h}, where, f"H[{k}]", (3, 3))
+            for k, (n, h) in enumerate(zip(names, Hs))
+        }
     sets = []
     for sub in sorted(p for p in d.iterdir() if p.is_dir() and not p.name.startswith(".")):
         files = images_in(sub)

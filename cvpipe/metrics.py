@@ -1,8 +1,10 @@
-"""Accuracy metrics against ground truth (small, generic, shared by the tasks' reports and benchmarks)."""
+"""Accuracy metrics against ground truth (small, generic, shared by the tasks' reports and benchmarks), and the one
+summary table every task's report has (:func:`not_processed_table`)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -224,3 +226,21 @@ def density(estimate: np.ndarray, truth: np.ndarray | None = None, mask: np.ndar
         known = _known(truth, mask)
     n = int(known.sum())
     return float("nan") if n == 0 else float(np.isfinite(estimate[known]).sum() / n)
+
+
+def not_processed_table(dropped: Sequence[Mapping[str, Any]]) -> list[dict]:
+    """The "Not processed" table of a report summary: a row ``[input, reason]`` per ``{"item", "reason"}`` that a
+    stage could not use; an empty list when it used everything (so that ``tables += not_processed_table(dropped)``).
+
+    Here rather than in :mod:`cvpipe.report`: every stage imports its task's report module, and the page builder's
+    edits must not rerun them.
+
+    Examples
+    --------
+    >>> not_processed_table([{"item": "b.jpg", "reason": "not a readable image"}])
+    [{'title': 'Not processed', 'columns': ['input', 'reason'], 'rows': [['b.jpg', 'not a readable image']]}]
+    >>> not_processed_table([])
+    []
+    """
+    rows = [[d["item"], d["reason"]] for d in dropped]
+    return [{"title": "Not processed", "columns": ["input", "reason"], "rows": rows}] if rows else []

@@ -1,7 +1,6 @@
 """Stage `hough_report`: agreement of our lines with OpenCV's, recall of the true lines where the folder has a
 truth.json, overlays of both, metrics (git-tracked) and a quality plot."""
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +19,7 @@ def hough_report(st: Stage) -> None:
     items, _ = datasets.find_hough(a.images)
     truth = {it.name: it.truth_lines for it in items if it.truth_lines is not None}
     ours, opencv = io.load_json(a.ours), io.load_json(a.opencv)
-    compared = hough.compare_runs(ours, opencv, truth, p.rho_tol, math.radians(p.theta_tol_deg))
+    compared = hough.compare_runs(ours, opencv, truth, p)
     lines = {Path(i["file"]).stem: {"ours": i["lines"]} for i in ours["images"]}
     for i in opencv["images"]:
         lines[Path(i["file"]).stem]["opencv"] = i["lines"]

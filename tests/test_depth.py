@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cvpipe import cli, io, samples
+from cvpipe import cli, geometry, io, samples
 from cvpipe.stereo import calibration, depth, rectify
 from cvpipe.errors import InputError
 
@@ -113,7 +113,7 @@ def test_cli_rectify_auto_depth_and_ply(sample_pair, tmp_path, capsys):
     z_true = c["focal"] * c["baseline"] / (truth + c["doffs"])
     H_left = np.array(doc["H_left"])
     yy, xx = np.mgrid[0:500:5, 0:741:5]
-    src = rectify.apply_h(np.linalg.inv(H_left), np.column_stack([xx.ravel(), yy.ravel()]))
+    src = geometry.apply_homography(np.linalg.inv(H_left), np.column_stack([xx.ravel(), yy.ravel()]))
     xi, yi = np.round(src).astype(int).T
     ok = (xi >= 0) & (xi < 741) & (yi >= 0) & (yi < 500)
     zt = np.full(len(xi), np.nan)
@@ -233,7 +233,7 @@ def test_cli_calibrated_rectification_from_opencv_yaml(sample_pair, tmp_path, ca
     R1 = np.linalg.inv(Kp) @ H_left @ K1
     R1 /= np.cbrt(np.linalg.det(R1))
     yy, xx = np.mgrid[0:500:4, 0:741:4]
-    src = rectify.apply_h(np.linalg.inv(H_left), np.column_stack([xx.ravel(), yy.ravel()]))
+    src = geometry.apply_homography(np.linalg.inv(H_left), np.column_stack([xx.ravel(), yy.ravel()]))
     xi, yi = np.round(src).astype(int).T
     ok = (xi >= 0) & (xi < 741) & (yi >= 0) & (yi < 500)
     zt = np.full(len(xi), np.nan)

@@ -7,20 +7,9 @@ import pytest
 from cvpipe.stereo import epipolar
 from cvpipe.errors import EstimationError, InputError
 
+from cameras import project, rotation
+
 K = np.array([[600.0, 0.0, 320.0], [0.0, 600.0, 240.0], [0.0, 0.0, 1.0]])
-
-
-def rotation(ax, ay, az):
-    cx, sx, cy, sy, cz, sz = np.cos(ax), np.sin(ax), np.cos(ay), np.sin(ay), np.cos(az), np.sin(az)
-    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    Rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
-    return Rz @ Ry @ Rx
-
-
-def project(X, R=np.eye(3), t=np.zeros(3)):
-    x = (X @ R.T + t) @ K.T
-    return x[:, :2] / x[:, 2:]
 
 
 def true_F(R, t):
@@ -37,7 +26,7 @@ def scene(n=200, seed=0, R=None, t=None):
     X = np.column_stack([rng.uniform(-2, 2, n), rng.uniform(-1.5, 1.5, n), rng.uniform(4, 10, n)])
     R = rotation(0.02, -0.03, 0.01) if R is None else R
     t = np.array([-0.5, 0.02, 0.03]) if t is None else t
-    return project(X), project(X, R, t), (true_F(R, t) if np.any(t) else None)
+    return project(X, K), project(X, K, R, t), (true_F(R, t) if np.any(t) else None)
 
 
 def same_up_to_sign(F, G):
@@ -109,7 +98,7 @@ class TestRansac:
         X = np.column_stack([rng.uniform(-2, 2, 150), rng.uniform(-1.5, 1.5, 150), np.full(150, 6.0)])
         R, t = rotation(0.02, -0.03, 0.01), np.array([-0.5, 0.02, 0.03])
         with pytest.raises(EstimationError, match="planar"):
-            epipolar.find_fundamental(project(X), project(X, R, t), rng=0)
+            epipolar.find_fundamental(project(X, K), project(X, K, R, t), rng=0)
 
     def test_too_few_and_collinear(self):
         x1, x2, _ = scene(n=7)

@@ -182,7 +182,7 @@ def test_probabilistic_recovers_drawn_segments():
     truth = np.array([[20, 30, 260, 30], [50, 10, 50, 180], [100, 60, 250, 190]])
     for x1, y1, x2, y2 in truth:
         cv2.line(edges, (int(x1), int(y1)), (int(x2), int(y2)), 255, 1)
-    segs = hough.hough_lines_probabilistic(edges, 1.0, math.pi / 180, 30, 40, 3, rng=0)
+    segs = hough.hough_lines_probabilistic(edges, 30, 40, 3, params=HoughLinesParams(rho=1.0, theta_deg=1.0), rng=0)
     # each drawn segment is covered (>= 90 %) by a detected one on its line; end points of a digital line are
     # exact up to a pixel, so 1.5 px and 1 degree
     found = hough.segment_segment_matches(segs, truth, dist_px=1.5, angle_deg=1.0, min_overlap=0.9)
@@ -257,6 +257,39 @@ def test_compare_runs_summary():
     assert m["recall_ours"] == m["recall_opencv"] == 0.5
     with pytest.raises(InputError, match="not in the opencv run"):
         hough.compare_runs(ours, {**ref, "images": []})
+
+
+def test_compare_runs_takes_the_report_section_in_degrees():
+    # a line 2 degrees off the truth: found within theta_tol_deg = 2.5, missed at 1.5 (so the degrees are converted,
+    # not read as radians, which would accept it at either); rho is exact, so rho_tol does not decide
+    lines = [[10.0, math.radians(2.0), 50.0]]
+    run = {"rho": 1.0, "theta": math.pi / 180, "images": [{"file": "a.png", "lines": lines}]}
+    truth = {"a": [[10.0, 0.0]]}
+    loose = hough.compare_runs(run, run, truth, HoughReportParams(theta_tol_deg=2.5))
+    strict = hough.compare_runs(run, run, truth, HoughReportParams(theta_tol_deg=1.5))
+    assert loose["recall_ours"] == 1.0 and strict["recall_ours"] == 0.0
+
+
+@pytest.mark.parametrize("method", ["ours", "opencv"])
+def test_detect_lines_takes_the_lines_section_in_degrees(method):
+    rng = np.random.default_rng(3)
+    edges = random_edges(rng, (90, 120), 0.01, lines=5)
+    p = HoughLinesParams(rho=0.5, theta_deg=0.5, threshold=30)
+    # the section's half-degree step is pi / 360 radians for both implementations: OpenCV's own lines, exactly
+    np.testing.assert_array_equal(hough.detect_lines(edges, p, method), opencv_lines(edges, 0.5, math.pi / 360, 30))
+    assert hough.hough_steps(p) == (0.5, math.radians(0.5))
+
+
+def test_detect_lines_refines_ours_only():
+    rng = np.random.default_rng(4)
+    edges = random_edges(rng, (90, 120), 0.01, lines=5)
+    p = HoughLinesParams(threshold=30, refine=True)
+    np.testing.assert_array_equal(hough.detect_lines(edges, p, "ours"),
+                                  hough.hough_lines(edges, 1.0, math.pi / 180, 30, refine=True))
+    # OpenCV has no refinement: the flag is ignored there, as in the hough_lines@opencv stage
+    np.testing.assert_array_equal(hough.detect_lines(edges, p, "opencv"), opencv_lines(edges, 1.0, math.pi / 180, 30))
+    with pytest.raises(InputError, match=r"`params` must be a HoughLinesParams"):
+        hough.detect_lines(edges, {"threshold": 30})
 
 
 def test_report_summary_is_valid_for_the_report_page():
@@ -337,7 +370,7 @@ def test_bad_parameters(kwargs, message):
     ({"max_line_gap": float("nan")}, r"`max_line_gap` must be a number >= 0"),
     ({"threshold": 0}, r"`threshold` must be >= 1"),
     ({"max_lines": 0}, r"`max_lines` must be >= 1"),
-    ({"rho": 0}, r"`rho` must be > 0"),
+    ({"params": {"rho": 0.5}}, r"`params` must be a HoughLinesParams \(the hough.lines section\), got dict"),
 ])
 def test_bad_probabilistic_parameters(kwargs, message):
     with pytest.raises(InputError, match=message):

@@ -5,24 +5,14 @@ import cv2
 import numpy as np
 import pytest
 
+from cvpipe import geometry
 from cvpipe.stereo import calibration, rectify
 from cvpipe.errors import EstimationError, InputError
 
+from cameras import project, rotation
+
 W, H = 640, 480
 K = np.array([[600.0, 0.0, 319.5], [0.0, 600.0, 239.5], [0.0, 0.0, 1.0]])
-
-
-def rotation(ax, ay, az):
-    cx, sx, cy, sy, cz, sz = np.cos(ax), np.sin(ax), np.cos(ay), np.sin(ay), np.cos(az), np.sin(az)
-    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    Rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
-    return Rz @ Ry @ Rx
-
-
-def project(X, K_, R=np.eye(3), t=np.zeros(3)):
-    x = (X @ R.T + t) @ K_.T
-    return x[:, :2] / x[:, 2:]
 
 
 def points(n, seed):
@@ -51,13 +41,13 @@ class TestUncalibrated:
         K2[1, 2] += 6.0  # and a shifted principal point
         p1, p2, c1, c2 = unrectified_pair(seed=seed, K2=K2)
         rect = rectify.rectify_uncalibrated(p1, p2, (W, H), rng=seed)
-        yl, yr = rectify.apply_h(rect.H_left, c1)[:, 1], rectify.apply_h(rect.H_right, c2)[:, 1]
+        yl, yr = geometry.apply_homography(rect.H_left, c1)[:, 1], geometry.apply_homography(rect.H_right, c2)[:, 1]
         err = np.abs(yl - yr)
         # 0.2 px matching noise on 400 matches: the epipolar geometry is known to a few hundredths of a pixel near
         # the matches (the benchmark measures ~0.05-0.1 px on real pairs); 0.15 / 0.5 px leave room for seeds
         assert np.median(err) < 0.15 and np.percentile(err, 95) < 0.5
         assert rect.vertical_error_median < 0.5  # the inlier matches carry the 0.2 px noise of both views
-        d = rectify.apply_h(rect.H_left, c1)[:, 0] - rectify.apply_h(rect.H_right, c2)[:, 0]
+        d = geometry.apply_homography(rect.H_left, c1)[:, 0] - geometry.apply_homography(rect.H_right, c2)[:, 0]
         # the robust smallest disparity sits at the 1 px margin (the noise-free check points are another sample of
         # the same depth range, so allow 1 px), and the search range covers every point
         assert -0.5 <= d.min() and abs(np.percentile(d, 0.5) - 1.0) < 1.0
@@ -83,8 +73,8 @@ class TestUncalibrated:
         # an already rectified pair: both maps are the identity up to the disparity shift of the right image and
         # the estimation noise. 0.2 px noise leaves the epipole's direction uncertain by ~0.2 degrees, which turns
         # both images by that much: ~1.5 px at the corners, 400 px from the centre; 3 px bounds it
-        assert np.abs(rectify.apply_h(rect.H_left, grid) - grid).max() < 3.0
-        moved = rectify.apply_h(rect.H_right, grid) - grid
+        assert np.abs(geometry.apply_homography(rect.H_left, grid) - grid).max() < 3.0
+        moved = geometry.apply_homography(rect.H_right, grid) - grid
         assert np.abs(moved[:, 1]).max() < 3.0 and np.abs(moved[:, 0] - rect.shift).max() < 3.0
 
     def test_forward_motion_cannot_be_rectified(self):
@@ -102,7 +92,7 @@ class TestUncalibrated:
     def test_opencv_baseline_runs_on_the_same_matches(self):
         p1, p2, c1, c2 = unrectified_pair(seed=4)
         H1, H2, F, inl = rectify.opencv_uncalibrated(p1, p2, (W, H))
-        err = np.abs(rectify.apply_h(H1, c1)[:, 1] - rectify.apply_h(H2, c2)[:, 1])
+        err = np.abs(geometry.apply_homography(H1, c1)[:, 1] - geometry.apply_homography(H2, c2)[:, 1])
         assert np.median(err) < 0.5 and inl.mean() > 0.9  # a sanity bound: the baseline works on this pair
 
 
@@ -240,7 +230,7 @@ class TestCalibrated:
         X = points(500, 9)
         p1, p2 = project(X, K), project(X, K2, R, t)
         rect = rectify.rectify_calibrated(calib, (W, H), p1, p2)
-        q1, q2 = rectify.apply_h(rect.H_left, p1), rectify.apply_h(rect.H_right, p2)
+        q1, q2 = geometry.apply_homography(rect.H_left, p1), geometry.apply_homography(rect.H_right, p2)
         # exact data and no lens distortion: the rows agree to rounding, and depth from the disparity with the
         # reported geometry equals the depth along the rectified optical axis
         assert np.abs(q1[:, 1] - q2[:, 1]).max() < 1e-6
@@ -282,11 +272,11 @@ def test_unrectified_sample_is_rectified_against_its_truth():
     d = truth["disparity"][::4, ::4]
     ok = np.isfinite(d)
     pl = np.column_stack([xx[ok], yy[ok]]).astype(float)
-    pr = rectify.apply_h(truth["H_unrectify"], pl - np.column_stack([d[ok], np.zeros(ok.sum())]))
-    err = np.abs(rectify.apply_h(rect.H_left, pl)[:, 1] - rectify.apply_h(rect.H_right, pr)[:, 1])
+    pr = geometry.apply_homography(truth["H_unrectify"], pl - np.column_stack([d[ok], np.zeros(ok.sum())]))
+    err = np.abs(geometry.apply_homography(rect.H_left, pl)[:, 1] - geometry.apply_homography(rect.H_right, pr)[:, 1])
     # the targets (median 0.3 px, p95 1 px); measured ~0.1 / 0.3 px on this pair
     assert np.median(err) < 0.3 and np.percentile(err, 95) < 1.0
-    disp = rectify.apply_h(rect.H_left, pl)[:, 0] - rectify.apply_h(rect.H_right, pr)[:, 0]
+    disp = geometry.apply_homography(rect.H_left, pl)[:, 0] - geometry.apply_homography(rect.H_right, pr)[:, 0]
     # the search range 0 .. max_disp - 1 covers the scene (all but stray truth pixels)
     assert np.mean((disp >= -0.5) & (disp < rect.max_disp)) > 0.995
 

@@ -4,7 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cvpipe import samples
+from cvpipe import geometry, samples
 
 
 @pytest.fixture(scope="module")
@@ -94,7 +94,7 @@ def test_stereo_truth(built):
 def test_stereo_unrectified_sample(built):
     """The unrectified pair: its calib.txt parses for the image size, and the true correspondences carried by
     H_unrectify are off the same row (so the pipeline must rectify it) by up to the drawn shift and rotation."""
-    from cvpipe.stereo import calibration, rectify
+    from cvpipe.stereo import calibration
 
     s = built["stereo"]
     calib = calibration.parse_calibration(s.texts["motorcycle_unrectified/calib.txt"], "calib.txt")
@@ -103,7 +103,7 @@ def test_stereo_unrectified_sample(built):
     arrays = s.arrays["motorcycle_unrectified/truth.npz"]
     disp = arrays["disparity"]
     ys, xs = np.nonzero(np.isfinite(disp))
-    right = rectify.apply_h(arrays["H_unrectify"], np.column_stack([xs - disp[ys, xs], ys]).astype(float))
+    right = geometry.apply_homography(arrays["H_unrectify"], np.column_stack([xs - disp[ys, xs], ys]).astype(float))
     dy = np.abs(right[:, 1] - ys)
     assert np.median(dy) > 1.0  # clearly not rectified (a rectified pair has dy = 0)
 

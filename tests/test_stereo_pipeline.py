@@ -10,8 +10,8 @@ import cv2
 import numpy as np
 import pytest
 
-from cvpipe import io, samples
-from cvpipe.stereo import depth, rectify
+from cvpipe import geometry, io, samples
+from cvpipe.stereo import depth
 from cvpipe.report import validate_summary
 
 
@@ -141,9 +141,9 @@ def test_rectification_undoes_the_known_transform(pipeline):
     ys, xs = np.nonzero(np.isfinite(disp))
     pick = np.random.default_rng(0).choice(len(xs), 2000, replace=False)
     x, y = xs[pick].astype(float), ys[pick].astype(float)
-    right = rectify.apply_h(H_un, np.column_stack([x - disp[ys[pick], xs[pick]], y]))
-    ql = rectify.apply_h(np.array(rec["H_left"]), np.column_stack([x, y]))
-    qr = rectify.apply_h(np.array(rec["H_right"]), right)
+    right = geometry.apply_homography(H_un, np.column_stack([x - disp[ys[pick], xs[pick]], y]))
+    ql = geometry.apply_homography(np.array(rec["H_left"]), np.column_stack([x, y]))
+    qr = geometry.apply_homography(np.array(rec["H_right"]), right)
     dy = np.abs(ql[:, 1] - qr[:, 1])
     # true correspondences (not just the matches the fit used): same 0.3 / 1 px targets as the benchmark
     assert np.median(dy) <= 0.3 and np.percentile(dy, 95) <= 1.0
@@ -198,9 +198,9 @@ def test_calibrated_rig(pipeline):
     ys, xs = np.nonzero(np.isfinite(truth))
     pick = np.random.default_rng(0).choice(len(xs), 2000, replace=False)
     x, y = xs[pick].astype(float), ys[pick].astype(float)
-    right = rectify.apply_h(K2 @ Rr @ np.linalg.inv(K2), np.column_stack([x - truth[ys[pick], xs[pick]], y]))
-    dy = np.abs(rectify.apply_h(np.array(rec["H_left"]), np.column_stack([x, y]))[:, 1]
-                - rectify.apply_h(np.array(rec["H_right"]), right)[:, 1])
+    right = geometry.apply_homography(K2 @ Rr @ np.linalg.inv(K2), np.column_stack([x - truth[ys[pick], xs[pick]], y]))
+    dy = np.abs(geometry.apply_homography(np.array(rec["H_left"]), np.column_stack([x, y]))[:, 1]
+                - geometry.apply_homography(np.array(rec["H_right"]), right)[:, 1])
     assert np.median(dy) <= 0.3 and np.percentile(dy, 95) <= 1.0
     assert io.load_json(root / "out/opencv_sgbm/run.json")["max_disp_from"]["rig"] == "rectification"
     z = np.load(root / "out/depth/rig/depth.npy", allow_pickle=False)

@@ -11,7 +11,6 @@ transforms and both probabilistic ones (a segment must also be half covered by a
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import time
 from pathlib import Path
@@ -89,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     if args.limit:
         images = images[:args.limit]
     p, e = HoughLinesParams(), HoughEdgesParams()
-    rho, theta, thr = p.rho, math.radians(p.theta_deg), args.threshold
+    (rho, theta), thr = hough.hough_steps(p), args.threshold
 
     compile_info = {} if args.no_compile else _compile_seconds()
     probe = np.zeros((30, 30), np.uint8)
@@ -119,8 +118,8 @@ def run(args: argparse.Namespace) -> int:
                 times[k].append(_timed(lambda: fn(edges)))
         med = {k: float(np.median(v)) for k, v in times.items()}
         gt = _gt_segments(root / "gt_lines" / f"{f.stem}.txt")
-        segs_ours = hough.hough_lines_probabilistic(edges, rho, theta, PROB_THRESHOLD, PROB_MIN_LENGTH,
-                                                    PROB_MAX_GAP, rng=0)
+        segs_ours = hough.hough_lines_probabilistic(edges, PROB_THRESHOLD, PROB_MIN_LENGTH, PROB_MAX_GAP, params=p,
+                                                    rng=0)
         segs_cv = cv2.HoughLinesP(edges, rho, theta, PROB_THRESHOLD, minLineLength=PROB_MIN_LENGTH,
                                   maxLineGap=PROB_MAX_GAP)
         segs_cv = np.zeros((0, 4)) if segs_cv is None else segs_cv.reshape(-1, 4)

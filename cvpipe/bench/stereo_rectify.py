@@ -33,7 +33,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
-from .. import io, stereo
+from .. import geometry, io, stereo
 from ..homography import correspondences
 from ..stereo import rectify
 
@@ -90,7 +90,7 @@ def true_correspondences(truth: np.ndarray, H_u: np.ndarray, size: tuple[int, in
     d = truth[::_STEP, ::_STEP]
     ok = np.isfinite(d)
     pl = np.column_stack([xx[ok], yy[ok]]).astype(np.float64)
-    pr = rectify.apply_h(H_u, pl - np.column_stack([d[ok], np.zeros(ok.sum())]))
+    pr = geometry.apply_homography(H_u, pl - np.column_stack([d[ok], np.zeros(ok.sum())]))
     inside = (pr[:, 0] >= 0) & (pr[:, 0] <= w - 1) & (pr[:, 1] >= 0) & (pr[:, 1] <= h - 1)
     return pl[inside], pr[inside]
 
@@ -103,14 +103,14 @@ def truth_in_rectified_frame(truth: np.ndarray, H_u: np.ndarray, H_left: np.ndar
     w, h = size
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
     prect = np.column_stack([xx.ravel(), yy.ravel()])
-    porig = rectify.apply_h(np.linalg.inv(H_left), prect)
+    porig = geometry.apply_homography(np.linalg.inv(H_left), prect)
     xi, yi = np.round(porig[:, 0]).astype(int), np.round(porig[:, 1]).astype(int)
     ok = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
     d = np.full(len(prect), np.nan)
     d[ok] = truth[yi[ok], xi[ok]]
     ok &= np.isfinite(d)
     out = np.full(len(prect), np.nan)
-    pr = rectify.apply_h(H_right @ H_u, np.column_stack([porig[ok, 0] - d[ok], porig[ok, 1]]))
+    pr = geometry.apply_homography(H_right @ H_u, np.column_stack([porig[ok, 0] - d[ok], porig[ok, 1]]))
     out[ok] = prect[ok, 0] - pr[:, 0]
     return out.reshape(h, w).astype(np.float32)
 
@@ -125,15 +125,15 @@ def visible_truth(truth: np.ndarray, H_u: np.ndarray, H_left: np.ndarray) -> np.
     d = truth.ravel().astype(np.float64)
     ok = np.isfinite(d)
     q = np.full_like(p, -1.0)
-    q[ok] = rectify.apply_h(H_u, np.column_stack([p[ok, 0] - d[ok], p[ok, 1]]))
-    r = rectify.apply_h(H_left, p)
+    q[ok] = geometry.apply_homography(H_u, np.column_stack([p[ok, 0] - d[ok], p[ok, 1]]))
+    r = geometry.apply_homography(H_left, p)
     inside = ((q[:, 0] >= 0) & (q[:, 0] <= w - 1) & (q[:, 1] >= 0) & (q[:, 1] <= h - 1)
               & (r[:, 0] >= 0) & (r[:, 0] <= w - 1) & (r[:, 1] >= 0) & (r[:, 1] <= h - 1))
     return np.where((ok & inside).reshape(h, w), truth, np.nan).astype(np.float32)
 
 
 def _vertical(H_left, H_right, pl, pr) -> np.ndarray:
-    return np.abs(rectify.apply_h(H_left, pl)[:, 1] - rectify.apply_h(H_right, pr)[:, 1])
+    return np.abs(geometry.apply_homography(H_left, pl)[:, 1] - geometry.apply_homography(H_right, pr)[:, 1])
 
 
 def run_rectify(args: argparse.Namespace, pairs: dict) -> int:

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..io import to_bgr
-from ..metrics import DetectionCounts, box_iou, corner_error, match_boxes
+from ..metrics import DetectionCounts, box_iou, corner_error, match_boxes, not_processed_table
 
 #: a region matches a true box at this IoU (DeepPCB's criterion, also used by ``cvpipe bench defect``)
 IOU = 0.33
@@ -343,9 +343,7 @@ def report_summary(records: list[dict], registration: Mapping[str, Any], evaluat
                                     _num(overall["false_alarm_rate"]), _num(overall["precision"]),
                                     _num(overall["recall"]), _num(overall["f1"]), overall["errors"],
                                     _num(overall.get("registration_corner_error_px"), 2)]]})
-    if dropped:
-        tables.append({"title": "Not processed", "columns": ["input", "reason"],
-                       "rows": [[d["item"], d["reason"]] for d in dropped]})
+    tables += not_processed_table(dropped)
     n, k = evaluated["probes"], evaluated["truth_probes"]
     truth_note = (f"{k} of {n} probes have ground truth (green boxes)." if k else
                   "These probes have no ground truth: the verdicts and regions are shown without accuracy.")

@@ -8,7 +8,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ..linalg import cholesky_solve  # the one SPD solve, shared with the panorama's adjustment
+from .._kernels import cholesky_solve  # the one SPD solve, shared with the panorama's adjustment
 
 #: relative size of the smaller principal axis below which a whole point set counts as collinear (1e-7: the
 #: 2x2 covariance resolves eigenvalue ratios down to ~1e-15, i.e. axis ratios down to ~3e-8)

@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from ..errors import InputError
+from ..metrics import not_processed_table
 
 
 def alignment_checkerboard(img_a: np.ndarray, img_b: np.ndarray, H_ab, tiles: int = 8) -> np.ndarray:
@@ -250,9 +251,7 @@ def report_summary(compared: dict, pictures: list, dropped: list[dict]) -> dict:
          "columns": ["pair", "matches", *(f"{m} corner error (px)" for m in methods),
                      *(f"{m} inliers" for m in methods)], "rows": rows},
     ]
-    if dropped:
-        tables.append({"title": "Not processed", "columns": ["input", "reason"],
-                       "rows": [[d["item"], d["reason"]] for d in dropped]})
+    tables += not_processed_table(dropped)
     if has_truth:
         truth_note = (f"{compared['truth_pairs']} of {compared['pairs']} pairs have a true homography: corner error is "
                       "the mean distance of A's four corners mapped by the estimated and the true H, and a pair "

@@ -2,7 +2,8 @@
 
 - :mod:`~cvpipe.hough.edges`: Canny edge maps (``canny_edges``);
 - :mod:`~cvpipe.hough.transform`: the standard transform with ``cv2.HoughLines`` semantics (``hough_lines``,
-  ``hough_grid``, ``hough_accumulator``) and OpenCV's as the baseline (``hough_lines_opencv``, ``IMPLEMENTATIONS``);
+  ``hough_grid``, ``hough_accumulator``), OpenCV's as the baseline (``hough_lines_opencv``, ``IMPLEMENTATIONS``)
+  and the entry point that takes the ``hough.lines`` section (``detect_lines``, units by ``hough_steps``);
 - :mod:`~cvpipe.hough.probabilistic`: our progressive probabilistic transform (``hough_lines_probabilistic``);
 - :mod:`~cvpipe.hough.evaluate`: agreement with OpenCV and with ground truth (``cell_agreement``, ``compare_runs``);
 - :mod:`~cvpipe.hough.report`: pictures and the report page (``draw_lines``, ``report_summary``);
@@ -15,8 +16,8 @@ from .evaluate import (cell_agreement, compare_runs, line_cells, line_segment_ma
                        segment_segment_matches, truth_matches)
 from .probabilistic import hough_lines_probabilistic
 from .report import draw_lines, draw_segments, quality_plot, report_summary
-from .transform import (IMPLEMENTATIONS, HoughGrid, get_impl, hough_accumulator, hough_grid, hough_lines,
-                        hough_lines_opencv)
+from .transform import (IMPLEMENTATIONS, HoughGrid, detect_lines, get_impl, hough_accumulator, hough_grid,
+                        hough_lines, hough_lines_opencv, hough_steps)
 
 __all__ = [
     "HoughGrid",
@@ -26,6 +27,8 @@ __all__ = [
     "hough_lines_opencv",
     "IMPLEMENTATIONS",
     "get_impl",
+    "hough_steps",
+    "detect_lines",
     "hough_lines_probabilistic",
     "canny_edges",
     "line_cells",

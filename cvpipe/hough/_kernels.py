@@ -127,6 +127,15 @@ def _vote_parallel(xs, ys, tab_cos, tab_sin, numrho, nchunks):
     return acc
 
 
+@njit(cache=True, inline="always")
+def _is_peak(acc, n, r, threshold):
+    """OpenCV's line cell: more than ``threshold`` votes, above the lower rho and angle neighbours, at least the
+    higher ones."""
+    v = acc[n, r]
+    return (v > threshold and v > acc[n, r - 1] and v >= acc[n, r + 1]
+            and v > acc[n - 1, r] and v >= acc[n + 1, r])
+
+
 @njit(cache=True)
 def _peaks(acc, threshold):
     """Angle index, rho index and votes of OpenCV's local maxima, sorted like ``hough_cmp_gt``."""
@@ -134,25 +143,19 @@ def _peaks(acc, threshold):
     nr = acc.shape[1] - 2
     width = np.int64(nr + 2)
     cells = np.int64(na + 2) * width
-    count = 0
+    count = 0  # a first pass counts the peaks, so that the second fills an array of exactly that size
     for n in range(1, na + 1):
         for r in range(1, nr + 1):
-            v = acc[n, r]
-            if (v > threshold and v > acc[n, r - 1] and v >= acc[n, r + 1]
-                    and v > acc[n - 1, r] and v >= acc[n + 1, r]):
-                count += 1
+            count += _is_peak(acc, n, r, threshold)
     bases = np.empty(count, np.int64)
     k = 0
     vmax = 0
     for n in range(1, na + 1):
         for r in range(1, nr + 1):
-            v = acc[n, r]
-            if (v > threshold and v > acc[n, r - 1] and v >= acc[n, r + 1]
-                    and v > acc[n - 1, r] and v >= acc[n + 1, r]):
+            if _is_peak(acc, n, r, threshold):
                 bases[k] = n * width + r
                 k += 1
-                if v > vmax:
-                    vmax = v
+                vmax = max(vmax, acc[n, r])
     # more votes first, then the smaller flat index (angle-major), as OpenCV's comparator: one int64 key per peak
     keys = np.empty(count, np.int64)
     for k in range(count):

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
 
 from ..errors import InputError
+from ..params import HoughReportParams
 
 __all__ = ["line_cells", "cell_agreement", "line_segment_matches", "segment_segment_matches", "truth_matches",
            "compare_runs", "metrics_of", "median_seconds"]
@@ -20,6 +22,11 @@ def _as_lines(lines: np.ndarray) -> np.ndarray:
     if arr.ndim != 2 or arr.shape[1] < 2:
         raise InputError(f"`lines` must have shape (N, 2) or (N, 3), got {arr.shape}")
     return arr
+
+
+def _as_segments(segments: np.ndarray) -> np.ndarray:
+    """``segments`` as a float64 (M, 4) array ``[x1, y1, x2, y2]``."""
+    return np.asarray(segments, np.float64).reshape(-1, 4)
 
 
 def line_cells(lines: np.ndarray, rho: float = 1.0, theta: float = np.pi / 180, min_theta: float = 0.0) -> np.ndarray:
@@ -77,6 +84,18 @@ def _undirected_angle_diff(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.minimum(d, np.pi - d)
 
 
+def _along(normal_x: np.ndarray, normal_y: np.ndarray, offset: np.ndarray, direction: np.ndarray,
+           segments: np.ndarray, dist_px: float, angle_deg: float) -> np.ndarray:
+    """(N, M) bool: segment m lies along line n, i.e. both of its end points are within ``dist_px`` of the line
+    ``normal . p = offset`` (unit normals, each argument (N, 1)) and its direction within ``angle_deg`` of
+    ``direction`` (radians)."""
+    d1 = np.abs(segments[:, 0] * normal_x + segments[:, 1] * normal_y - offset)
+    d2 = np.abs(segments[:, 2] * normal_x + segments[:, 3] * normal_y - offset)
+    seg_dir = np.arctan2(segments[:, 3] - segments[:, 1], segments[:, 2] - segments[:, 0])
+    ang = _undirected_angle_diff(direction, seg_dir[None, :])
+    return (d1 <= dist_px) & (d2 <= dist_px) & (ang <= np.deg2rad(angle_deg))
+
+
 def line_segment_matches(lines: np.ndarray, segments: np.ndarray, dist_px: float = 2.0,
                          angle_deg: float = 1.0) -> np.ndarray:
     """Which ground-truth segments some (infinite) Hough line passes along.
@@ -94,6 +113,7 @@ def line_segment_matches(lines: np.ndarray, segments: np.ndarray, dist_px: float
     Returns
     -------
     ndarray, shape (M,), bool
+        True where some line passes along the segment.
 
     Examples
     --------
@@ -101,18 +121,9 @@ def line_segment_matches(lines: np.ndarray, segments: np.ndarray, dist_px: float
     >>> line_segment_matches([[20.0, np.pi / 2]], [[0, 20, 79, 20], [5, 0, 5, 59]]).tolist()  # the row y = 20
     [True, False]
     """
-    segments = np.asarray(segments, np.float64).reshape(-1, 4)
-    lines = np.asarray(lines, np.float64)
-    if len(lines) == 0 or len(segments) == 0:
-        return np.zeros(len(segments), bool)
+    lines, segments = _as_lines(lines), _as_segments(segments)
     rho, th = lines[:, 0][:, None], lines[:, 1][:, None]
-    c, s = np.cos(th), np.sin(th)
-    d1 = np.abs(segments[:, 0] * c + segments[:, 1] * s - rho)
-    d2 = np.abs(segments[:, 2] * c + segments[:, 3] * s - rho)
-    seg_dir = np.arctan2(segments[:, 3] - segments[:, 1], segments[:, 2] - segments[:, 0])
-    ang = _undirected_angle_diff(th + np.pi / 2, seg_dir[None, :])
-    ok = (d1 <= dist_px) & (d2 <= dist_px) & (ang <= np.deg2rad(angle_deg))
-    return ok.any(axis=0)
+    return _along(np.cos(th), np.sin(th), rho, th + np.pi / 2, segments, dist_px, angle_deg).any(axis=0)
 
 
 def segment_segment_matches(found: np.ndarray, segments: np.ndarray, dist_px: float = 2.0, angle_deg: float = 1.0,
@@ -131,25 +142,20 @@ def segment_segment_matches(found: np.ndarray, segments: np.ndarray, dist_px: fl
     Returns
     -------
     ndarray, shape (M,), bool
+        True where some detected segment covers the ground-truth segment.
 
     Examples
     --------
     >>> segment_segment_matches([[0, 20, 79, 20]], [[10, 20, 60, 20], [5, 0, 5, 59]]).tolist()
     [True, False]
     """
-    segments = np.asarray(segments, np.float64).reshape(-1, 4)
-    found = np.asarray(found, np.float64).reshape(-1, 4)
-    if len(found) == 0 or len(segments) == 0:
-        return np.zeros(len(segments), bool)
+    found, segments = _as_segments(found), _as_segments(segments)
     fdx, fdy = found[:, 2] - found[:, 0], found[:, 3] - found[:, 1]
     flen = np.hypot(fdx, fdy)
     flen = np.where(flen > 0, flen, 1.0)
     nx, ny = (-fdy / flen)[:, None], (fdx / flen)[:, None]
     off = (found[:, 0] * nx[:, 0] + found[:, 1] * ny[:, 0])[:, None]
-    d1 = np.abs(segments[:, 0] * nx + segments[:, 1] * ny - off)
-    d2 = np.abs(segments[:, 2] * nx + segments[:, 3] * ny - off)
-    ang = _undirected_angle_diff(np.arctan2(fdy, fdx)[:, None],
-                                 np.arctan2(segments[:, 3] - segments[:, 1], segments[:, 2] - segments[:, 0])[None, :])
+    along = _along(nx, ny, off, np.arctan2(fdy, fdx)[:, None], segments, dist_px, angle_deg)
     gdx, gdy = segments[:, 2] - segments[:, 0], segments[:, 3] - segments[:, 1]
     glen = np.hypot(gdx, gdy)
     gl = np.where(glen > 0, glen, 1.0)
@@ -158,8 +164,7 @@ def segment_segment_matches(found: np.ndarray, segments: np.ndarray, dist_px: fl
     t2 = (found[:, 2][:, None] - segments[:, 0]) * ux + (found[:, 3][:, None] - segments[:, 1]) * uy
     lo, hi = np.maximum(np.minimum(t1, t2), 0.0), np.minimum(np.maximum(t1, t2), glen)
     cover = np.clip(hi - lo, 0.0, None) >= min_overlap * glen
-    ok = (d1 <= dist_px) & (d2 <= dist_px) & (ang <= np.deg2rad(angle_deg)) & cover
-    return ok.any(axis=0)
+    return (along & cover).any(axis=0)
 
 
 def truth_matches(lines: np.ndarray, truth: np.ndarray, rho_tol: float = 3.0, theta_tol: float = np.deg2rad(1.5)
@@ -205,8 +210,8 @@ def median_seconds(fn, repeats: int = 5, warmup: int = 1) -> float:
     return float(np.median(times))
 
 
-def compare_runs(ours: dict, opencv: dict, truth: dict | None = None, rho_tol: float = 3.0,
-                 theta_tol: float = np.deg2rad(1.5)) -> dict:
+def compare_runs(ours: dict, opencv: dict, truth: dict | None = None, params: HoughReportParams | None = None
+                 ) -> dict:
     """Agreement and truth recall of two ``hough_lines`` stage results (see ``stages/hough_lines.py``).
 
     Parameters
@@ -215,6 +220,9 @@ def compare_runs(ours: dict, opencv: dict, truth: dict | None = None, rho_tol: f
         ``{"rho", "theta", "images": [{"file", "lines": [[rho, theta, votes]]}]}`` per implementation.
     truth : dict or None
         Image stem -> (N, 2) true ``[rho, theta]`` lines, for the images that have truth.
+    params : HoughReportParams or None
+        The ``hough.report`` section: a true line is found by a detected one within ``rho_tol`` pixels and
+        ``theta_tol_deg`` degrees (:func:`truth_matches`); None: its defaults.
 
     Returns
     -------
@@ -234,6 +242,8 @@ def compare_runs(ours: dict, opencv: dict, truth: dict | None = None, rho_tol: f
     """
     from pathlib import PurePath
 
+    p = HoughReportParams() if params is None else params
+    rho_tol, theta_tol = p.rho_tol, math.radians(p.theta_tol_deg)
     stem = lambda name: PurePath(name).stem  # noqa: E731 - edge maps are PNGs of the same stem as the inputs
     ref = {stem(i["file"]): i for i in opencv["images"]}
     true = truth or {}
@@ -267,13 +277,9 @@ def metrics_of(compared: dict) -> dict:
 
     Examples
     --------
-    >>> import numpy as np
-    >>> run = {"rho": 1.0, "theta": np.pi / 180, "threshold": 60,
-    ...        "images": [{"file": "a.png", "lines": [[20.0, np.pi / 2, 80]]}]}
-    >>> compared = compare_runs(run, run, {"a": [[20.0, np.pi / 2], [5.0, 0.0]]})
-    >>> m = metrics_of(compared)["hough"]
-    >>> sorted(m), m["a"]["identical"], m["all"]["recall_opencv"]
-    (['a', 'all'], 1, 0.5)
+    >>> compared = {"images": 1, "parity_min": 1.0, "per_image": [{"file": "a", "parity": 1.0, "identical": True}]}
+    >>> metrics_of(compared)  # the summary under "all", each image under its name, booleans as 0/1
+    {'hough': {'all': {'images': 1, 'parity_min': 1.0}, 'a': {'parity': 1.0, 'identical': 1}}}
     """
     summary = {k: v for k, v in compared.items() if k != "per_image"}
     per_image = {r["file"]: {k: (int(v) if isinstance(v, bool) else v) for k, v in r.items() if k != "file"}

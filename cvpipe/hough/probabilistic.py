@@ -11,21 +11,15 @@ import math
 import numpy as np
 
 from ..errors import InputError
-from .transform import _check_edges, _check_int, hough_grid
+from ..params import HoughLinesParams
+from .transform import _check_edges, _check_int, hough_grid, hough_steps
 
 __all__ = ["hough_lines_probabilistic"]
 
 
 def hough_lines_probabilistic(
-    edges: np.ndarray,
-    rho: float = 1.0,
-    theta: float = np.pi / 180,
-    threshold: int = 50,
-    min_line_length: float = 30.0,
-    max_line_gap: float = 5.0,
-    *,
-    max_lines: int = 100_000,
-    rng: int | np.random.Generator | None = None,
+    edges: np.ndarray, threshold: int = 50, min_line_length: float = 30.0, max_line_gap: float = 5.0, *,
+    params: HoughLinesParams | None = None, max_lines: int = 100_000, rng: int | np.random.Generator | None = None,
 ) -> np.ndarray:
     """Our progressive probabilistic Hough transform (segments, like ``cv2.HoughLinesP``).
 
@@ -39,14 +33,16 @@ def hough_lines_probabilistic(
     ----------
     edges : ndarray, shape (H, W), uint8 or bool
         Edge map; nonzero pixels vote.
-    rho, theta : float
-        Accumulator resolution in pixels and radians.
     threshold : int
         Votes a cell needs to exceed before its line is followed; >= 1.
     min_line_length : float
         Shortest segment kept, in pixels along the major axis; >= 0.
     max_line_gap : float
         Longest run of missing pixels bridged, in pixels; >= 0.
+    params : HoughLinesParams or None
+        The accumulator resolution: its ``rho`` (pixels) and ``theta_deg`` (degrees, converted by
+        :func:`~cvpipe.hough.transform.hough_steps`); None: the section's defaults, 1 px and 1 degree. Its
+        ``threshold`` is the standard transform's: this one takes its own.
     max_lines : int
         Stop after this many segments.
     rng : None, int or numpy Generator
@@ -72,7 +68,7 @@ def hough_lines_probabilistic(
         if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
                 or not math.isfinite(float(value)) or value < 0:
             raise InputError(f"`{name}` must be a number >= 0, got {value!r}")
-    grid = hough_grid(edges.shape, rho, theta)
+    grid = hough_grid(edges.shape, *hough_steps(params))
     rng = np.random.default_rng(rng)
     npts = int(np.count_nonzero(edges))
     order = rng.permutation(npts).astype(np.int64)

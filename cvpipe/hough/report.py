@@ -7,6 +7,7 @@ import math
 import cv2
 import numpy as np
 
+from ..metrics import not_processed_table
 from ..overlays import to_bgr
 from .evaluate import _as_lines
 
@@ -100,9 +101,7 @@ def report_summary(metrics: dict, ours: dict, opencv: dict, pictures: list[dict]
                      "true lines found (OpenCV)", "true lines"],
          "rows": per_image},
     ]
-    if dropped:
-        tables.append({"title": "Not processed", "columns": ["input", "reason"],
-                       "rows": [[d["item"], d["reason"]] for d in dropped]})
+    tables += not_processed_table(dropped)
     return {
         "task": "hough",
         "title": "Our standard Hough transform against cv2.HoughLines at identical parameters",

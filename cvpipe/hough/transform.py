@@ -33,9 +33,10 @@ import cv2
 import numpy as np
 
 from ..errors import InputError, check_memory
+from ..params import HoughLinesParams
 
 __all__ = ["HoughGrid", "hough_grid", "hough_accumulator", "hough_lines", "hough_lines_opencv", "IMPLEMENTATIONS",
-           "get_impl"]
+           "get_impl", "hough_steps", "detect_lines"]
 
 
 # ------------------------------------------------------------------------------------------------- validation
@@ -364,3 +365,62 @@ def get_impl(name: str):
     if name not in IMPLEMENTATIONS:
         raise InputError(f"`impl` must be one of {sorted(IMPLEMENTATIONS)}, got {name!r}")
     return IMPLEMENTATIONS[name]
+
+
+def hough_steps(params: HoughLinesParams | None = None) -> tuple[float, float]:
+    """The accumulator steps of the ``hough.lines`` section in this package's units: ``(rho in pixels, theta in
+    radians)``, the one place where the section's ``theta_deg`` becomes the radians of ``cv2.HoughLines``.
+
+    Examples
+    --------
+    >>> from cvpipe.params import HoughLinesParams
+    >>> hough_steps(HoughLinesParams(rho=2.0, theta_deg=90.0))
+    (2.0, 1.5707963267948966)
+    """
+    p = HoughLinesParams() if params is None else params
+    if not isinstance(p, HoughLinesParams):
+        raise InputError(f"`params` must be a HoughLinesParams (the hough.lines section), got {type(p).__name__}")
+    return p.rho, math.radians(p.theta_deg)
+
+
+def detect_lines(edges: np.ndarray, params: HoughLinesParams | None = None, method: str = "ours", *,
+                 parallel: bool | None = None) -> np.ndarray:
+    """The lines of ``edges`` with the ``hough.lines`` parameters, by ``method`` (a key of :data:`IMPLEMENTATIONS`).
+
+    The entry point of the ``hough_lines`` stage: ``rho``, ``theta_deg`` (converted by :func:`hough_steps`) and
+    ``threshold`` go to :func:`hough_lines` or :func:`hough_lines_opencv`; ``refine`` applies to ``ours`` only
+    (OpenCV has no refinement) and ``repeats`` is the stage's timing count, not used here.
+
+    Parameters
+    ----------
+    edges : ndarray, shape (H, W), uint8 or bool
+        Edge map; nonzero pixels vote.
+    params : HoughLinesParams or None
+        The ``hough.lines`` section (None: its defaults).
+    method : {"ours", "opencv"}
+    parallel : bool or None
+        Passed to :func:`hough_lines` (``ours`` only).
+
+    Returns
+    -------
+    ndarray, shape (N, 3), float64
+        ``[rho (px), theta (rad), votes]`` per line, as :func:`hough_lines`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cvpipe.params import HoughLinesParams
+    >>> edges = np.zeros((60, 80), np.uint8)
+    >>> edges[20, :] = 255  # the row y = 20: theta = 90 deg, rho = 20 px, 80 pixels
+    >>> detect_lines(edges, HoughLinesParams(threshold=60)).tolist()
+    [[20.0, 1.5707963705062866, 80.0]]
+    >>> np.array_equal(detect_lines(edges, HoughLinesParams(threshold=60), "opencv"),
+    ...                hough_lines(edges, 1.0, np.pi / 180, 60))
+    True
+    """
+    p = HoughLinesParams() if params is None else params
+    fn = get_impl(method)
+    rho, theta = hough_steps(p)
+    if fn is hough_lines:
+        return hough_lines(edges, rho, theta, p.threshold, refine=p.refine, parallel=parallel)
+    return fn(edges, rho, theta, p.threshold)

@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from ..datasets import PanoramaSet
-from ..metrics import corner_error
+from ..metrics import corner_error, not_processed_table
 from .features import rescale_homographies
 
 #: the compared methods, in table order
@@ -234,9 +234,7 @@ def report_summary(results: Sequence[dict], pictures: list[dict], dropped: Seque
                "columns": ["set", "method", "stitched", "images used", "size (w x h)",
                            "median pairwise corner error px", "empty share", "ghosting (grey levels)", "failure"],
                "rows": rows}]
-    if dropped:
-        tables.append({"title": "Not processed", "columns": ["input", "reason"],
-                       "rows": [[d["item"], d["reason"]] for d in dropped]})
+    tables += not_processed_table(dropped)
     return {
         "task": "panorama",
         "title": "Panorama stitching: ours vs cv2.Stitcher",

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .. import io
+from .. import geometry, io
 from ..errors import InputError
 from . import rectify
 from .calibration import Calibration
@@ -116,7 +116,7 @@ def rectify_pair(left: np.ndarray, right: np.ndarray, pts1: np.ndarray, pts2: np
     record: dict = {"matches": int(len(p1)), "calib": None if calib is None else calib.source}
     if calib is not None and not calib.rectified:
         rect = rectify.rectify_calibrated(calib, (w, h), p1, p2, margin=margin)
-        q1, q2 = rectify.apply_h(rect.H_left, p1), rectify.apply_h(rect.H_right, p2)
+        q1, q2 = geometry.apply_homography(rect.H_left, p1), geometry.apply_homography(rect.H_right, p2)
         keep = np.abs(q1[:, 1] - q2[:, 1]) <= 2.0  # as rectify_calibrated (lens distortion left out here)
         q1, q2 = q1[keep], q2[keep]
         record["kind"] = "calibrated"
@@ -130,8 +130,8 @@ def rectify_pair(left: np.ndarray, right: np.ndarray, pts1: np.ndarray, pts2: np
     else:
         rect = rectify.rectify_uncalibrated(p1, p2, (w, h), threshold=threshold, margin=margin, calibration=calib,
                                             rng=seed)
-        q1 = rectify.apply_h(rect.H_left, p1[rect.fit.inliers])
-        q2 = rectify.apply_h(rect.H_right, p2[rect.fit.inliers])
+        q1 = geometry.apply_homography(rect.H_left, p1[rect.fit.inliers])
+        q2 = geometry.apply_homography(rect.H_right, p2[rect.fit.inliers])
         record.update(kind="uncalibrated", inliers=int(rect.fit.num_inliers))
         _vertical(record, rect.vertical_error, "inlier matches of the fundamental matrix")
     record.update(H_left=rect.H_left.tolist(), H_right=rect.H_right.tolist(), shift_px=float(rect.shift),

@@ -38,6 +38,7 @@ import cv2
 import numpy as np
 
 from ..errors import EstimationError, InputError
+from ..geometry import apply_homography
 from .calibration import Calibration, _check_size
 from .epipolar import FundamentalFit, epipoles, find_fundamental
 
@@ -131,13 +132,6 @@ class Rectification:
 # ------------------------------------------------------------------------------------------- small helpers
 
 
-def apply_h(H: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """(N, 2) points mapped by the homography ``H`` (homogeneous column vectors)."""
-    p = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
-    q = p @ H[:, :2].T + H[:, 2]
-    return q[:, :2] / q[:, 2:3]
-
-
 def distortion(H, size) -> dict[str, float]:
     """Distortion of an image by a rectifying homography, from its mid-lines (Loop & Zhang's measures).
 
@@ -156,7 +150,7 @@ def distortion(H, size) -> dict[str, float]:
     """
     w, h = _check_size(size)
     H = np.asarray(H, dtype=np.float64)
-    a, b, c, d = apply_h(H, np.array([[(w - 1) / 2, 0], [w - 1, (h - 1) / 2], [(w - 1) / 2, h - 1],
+    a, b, c, d = apply_homography(H, np.array([[(w - 1) / 2, 0], [w - 1, (h - 1) / 2], [(w - 1) / 2, h - 1],
                                       [0, (h - 1) / 2]]))
     x, y = b - d, c - a
     cosang = abs(float(x @ y)) / (np.linalg.norm(x) * np.linalg.norm(y))
@@ -167,7 +161,7 @@ def distortion(H, size) -> dict[str, float]:
 def _shear(Hp: np.ndarray, w: int, h: int) -> np.ndarray:
     """Loop & Zhang's shearing transform S = [[sa, sb, 0], [0, 1, 0], [0, 0, 1]] that makes the mapped mid-lines
     of a (w, h) image perpendicular with length ratio (w - 1) / (h - 1)."""
-    a, b, c, d = apply_h(Hp, np.array([[(w - 1) / 2, 0], [w - 1, (h - 1) / 2], [(w - 1) / 2, h - 1],
+    a, b, c, d = apply_homography(Hp, np.array([[(w - 1) / 2, 0], [w - 1, (h - 1) / 2], [(w - 1) / 2, h - 1],
                                        [0, (h - 1) / 2]]))
     (xu, xv), (yu, yv) = b - d, c - a
     W, Hh = float(w - 1), float(h - 1)
@@ -298,10 +292,10 @@ def rectifying_homographies(F, pts1, pts2, size, margin: float = 1.0, right_anch
     Hp = np.vstack([r1, r2, r3])
     H_right = _shear(Hp, w, h) @ Hp
     ax, ay = (cx, cy) if right_anchor is None else (float(right_anchor[0]), float(right_anchor[1]))
-    x_anchor = apply_h(H_right, np.array([[ax, ay]]))[0, 0]
+    x_anchor = apply_homography(H_right, np.array([[ax, ay]]))[0, 0]
     H_right = np.array([[1.0, 0.0, ax - x_anchor], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]) @ H_right
-    xl = apply_h(H_left, p1)[:, 0]
-    xr = apply_h(H_right, p2)[:, 0]
+    xl = apply_homography(H_left, p1)[:, 0]
+    xr = apply_homography(H_right, p2)[:, 0]
     shift, lo, hi = _disparity_shift(xl, xr, margin)
     H_right = np.array([[1.0, 0.0, shift], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]) @ H_right
     return H_left / H_left[2, 2], H_right / H_right[2, 2], shift, lo, hi
@@ -346,12 +340,12 @@ def rectify_uncalibrated(pts1, pts2, size, threshold: float = 1.0, margin: float
     p2 = np.asarray(pts2, dtype=np.float64).reshape(-1, 2)[fit.inliers]
     anchor = None if calibration is None else (calibration.K2[0, 2], calibration.K2[1, 2])
     H_left, H_right, shift, lo, hi = rectifying_homographies(fit.F, p1, p2, (w, h), margin, anchor)
-    vert = np.abs(apply_h(H_left, p1)[:, 1] - apply_h(H_right, p2)[:, 1])
+    vert = np.abs(apply_homography(H_left, p1)[:, 1] - apply_homography(H_right, p2)[:, 1])
     depth = None
     if calibration is not None:
         K1 = calibration.K1
         J = _jacobian(H_left, K1[0, 2], K1[1, 2])
-        c0 = apply_h(H_left, np.array([[K1[0, 2], K1[1, 2]]]))[0]
+        c0 = apply_homography(H_left, np.array([[K1[0, 2], K1[1, 2]]]))[0]
         depth = DepthGeometry(focal=float(K1[0, 0] * math.sqrt(abs(np.linalg.det(J)))), cx=float(c0[0]),
                               cy=float(c0[1]), baseline=calibration.baseline,
                               doffs=float(calibration.doffs + shift), unit=calibration.unit, exact=False)

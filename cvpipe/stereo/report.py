@@ -7,9 +7,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .. import io, metrics
+from .. import geometry, io, metrics
 from . import depth as depth_mod
-from . import rectify
 
 #: bad-pixel thresholds in pixels used by the stages and the benchmark (Middlebury's bad-1.0 and bad-2.0)
 BAD_THRESHOLDS = (1.0, 2.0)
@@ -229,9 +228,7 @@ def report_summary(runs: dict, pictures: list[dict], dropped: list[dict], error_
         {"title": "Per pair", "columns": ["pair", "method", "max_disp", "valid %", "bad-2.0 %", "mean error px"],
          "rows": per_pair},
     ]
-    if dropped:
-        tables.append({"title": "Not processed", "columns": ["input", "reason"],
-                       "rows": [[d["item"], d["reason"]] for d in dropped]})
+    tables += metrics.not_processed_table(dropped)
     if truth_pairs:
         truth_note = (f"{len(truth_pairs)} of {len(names)} pairs have a true disparity ({', '.join(truth_pairs)}). "
                       "A pixel is bad when its estimate is missing or off by more than the threshold, over all pixels "
@@ -360,8 +357,8 @@ def rectification_picture(left: np.ndarray, right: np.ndarray, rect_left: np.nda
     if len(q1):
         order = np.argsort(q1[:, 1], kind="stable")
         rows = order[np.unique(np.linspace(0, len(order) - 1, min(lines, len(order))).round().astype(int))]
-    o1 = rectify.apply_h(np.linalg.inv(np.asarray(H_left, float)), q1) if len(q1) else q1
-    o2 = rectify.apply_h(np.linalg.inv(np.asarray(H_right, float)), q2) if len(q2) else q2
+    o1 = geometry.apply_homography(np.linalg.inv(np.asarray(H_left, float)), q1) if len(q1) else q1
+    o2 = geometry.apply_homography(np.linalg.inv(np.asarray(H_right, float)), q2) if len(q2) else q2
     top = _pair_with_lines(left, right, o1, o2, rows, "original pair: lines through the left points' rows")
     bottom = _pair_with_lines(rect_left, rect_right, q1, q2, rows,
                               "rectified pair: each line is the epipolar line of the left point (same row)")

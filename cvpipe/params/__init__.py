@@ -10,7 +10,7 @@ must be in (0.0, 100.0], got -1``); the same check runs when Python code builds 
 then names the bare field. Types are strict: ``true`` and ``"3"`` are not numbers, ``3.0`` is not an integer, but
 ``3`` is accepted for a float field (and stored as ``3.0``).
 
-A new section is a :class:`Section` subclass, one ``SECTIONS`` entry and the same keys in ``params.yaml``::
+A new section is a :class:`Section` subclass, one :data:`SECTIONS` entry and the same keys in ``params.yaml``::
 
     class HoughEdgesParams(Section):
         canny_low: float = Field(50.0, ge=0.0)
@@ -18,7 +18,7 @@ A new section is a :class:`Section` subclass, one ``SECTIONS`` entry and the sam
         aperture: Literal[3, 5, 7] = 3
         l2_gradient: bool = False
 
-    SECTIONS.update({"hough.edges": HoughEdgesParams})
+    SECTIONS = {..., "hough.edges": HoughEdgesParams, ...}
 
 Copies with changes go through :func:`replace` (validated; ``model_copy(update=...)`` would skip the checks), dicts
 through ``model_dump()``.
@@ -26,249 +26,18 @@ through ``model_dump()``.
 
 from __future__ import annotations
 
-import dataclasses
-import operator
 import os
-import typing
 import warnings
-from pathlib import Path
-from typing import Annotated, Any, Literal, TypeVar
+from typing import Annotated, Literal
 
-import annotated_types
-import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import Field, field_validator
 from pydantic_core import PydanticCustomError
 
-from .errors import InputError
-
-T = TypeVar("T")
+# the machinery, re-exported: `from cvpipe.params import Section, from_mapping, load_section` keeps working
+from .base import Bound, Section, from_mapping, load_section, read_params_file, replace  # noqa: F401
 
 #: the feature detectors of :data:`cvpipe.features.DETECTORS` (a test keeps the two equal)
 Detector = Literal["sift", "orb", "brisk", "akaze"]
-
-_OPS = {">=": operator.ge, ">": operator.gt, "<=": operator.le}
-
-
-@dataclasses.dataclass(frozen=True)
-class Bound:
-    """A limit given by another field of the same section: ``p2: Annotated[int, Bound(">", "p1")]``.
-
-    ``op`` is ``">="``, ``">"`` (a lower limit) or ``"<="`` (an upper limit); the field's own ``Field`` limits still
-    apply, and the message shows both.
-    """
-
-    op: Literal[">=", ">", "<="]
-    other: str
-
-
-class Section(BaseModel):
-    """Base of every ``params.yaml`` section: frozen, unknown keys refused, strict types, :class:`Bound` checked."""
-
-    model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
-
-    def __init__(self, /, **data: Any) -> None:
-        try:
-            super().__init__(**data)
-        except ValidationError as exc:
-            raise InputError(_message(type(self), exc, "", data)) from exc
-
-    # pydantic calls an overridden __init__ from model_validate too (whose errors from_mapping words with the
-    # section's name); this mark, the one BaseModel.__init__ carries, keeps validation on pydantic's own path
-    __init__.__pydantic_base_init__ = True  # type: ignore[attr-defined]
-
-    @field_validator("*", mode="before")
-    @classmethod
-    def _exact_choice(cls, value: Any, info: Any) -> Any:
-        """A choice matches by type too: pydantic's ``Literal[3, 5, 7]`` takes ``3.0`` even in strict mode."""
-        choices = _choices(cls.model_fields[info.field_name].annotation)
-        if choices and value is not None and not any(type(value) is type(c) and value == c for c in choices):
-            raise PydanticCustomError("literal_error", "not one of the choices", {"expected": str(choices)})
-        return value
-
-    @model_validator(mode="after")
-    def _check_bounds(self):
-        for name, info in type(self).model_fields.items():
-            for b in info.metadata:
-                if isinstance(b, Bound):
-                    value, limit = getattr(self, name), getattr(self, b.other)
-                    if not _OPS[b.op](value, limit):
-                        raise PydanticCustomError("bound", "`{field}` must be {op} `{other}` ({limit}), got {value}",
-                                                  {"field": name, "op": b.op, "other": b.other, "limit": limit,
-                                                   "value": value})
-        return self
-
-    def replace(self: T, **changes: Any) -> T:
-        """A validated copy with ``changes`` (``dataclasses.replace`` for a section).
-
-        Examples
-        --------
-        >>> MatchParams().replace(ratio=0.7).ratio
-        0.7
-        >>> MatchParams().replace(ratio=0.0)
-        Traceback (most recent call last):
-        ...
-        cvpipe.errors.InputError: `ratio` must be in (0.0, 1.0], got 0.0
-        """
-        return type(self)(**{**dict(self), **changes})
-
-
-def replace(obj: T, /, **changes: Any) -> T:
-    """``dataclasses.replace`` that also takes a :class:`Section` (validated, unlike ``model_copy(update=...)``)."""
-    if isinstance(obj, Section):
-        return obj.replace(**changes)
-    return dataclasses.replace(obj, **changes)
-
-
-def _range(info: Any, bound: Bound | None = None, limit: Any = None) -> str:
-    """``"[0, 1.0]"``, ``"(0.0, inf]"``... from a field's ``Field`` limits, ``bound`` (set to ``limit``) replacing the
-    side it sets."""
-    lo, hi = "[-inf", "inf]"
-    for m in info.metadata:
-        if isinstance(m, annotated_types.Gt):
-            lo = f"({m.gt!r}"
-        elif isinstance(m, annotated_types.Ge):
-            lo = f"[{m.ge!r}"
-        elif isinstance(m, annotated_types.Lt):
-            hi = f"{m.lt!r})"
-        elif isinstance(m, annotated_types.Le):
-            hi = f"{m.le!r}]"
-    if bound is not None and bound.op == "<=":
-        hi = f"{limit!r}]"
-    elif bound is not None:
-        lo = f"{'[' if bound.op == '>=' else '('}{limit!r}"
-    return f"{lo}, {hi}"
-
-
-def _choices(tp: Any) -> list | None:
-    """The values of a ``Literal`` annotation (inside ``Optional``), else None."""
-    if typing.get_origin(tp) is Literal:
-        return list(typing.get_args(tp))
-    for arg in typing.get_args(tp):
-        if (found := _choices(arg)) is not None:
-            return found
-    return None
-
-
-_TYPE_WORDS = {
-    "int_type": "an integer", "int_from_float": "an integer", "float_type": "a number", "bool_type": "true or false",
-    "string_type": "a string", "tuple_type": "a list", "list_type": "a list",
-}
-
-
-def _message(cls: type[BaseModel], exc: ValidationError, section: str, data: Any) -> str:
-    """One line for the first error of ``exc``, naming the dotted key (``section.field``) and what it accepts.
-
-    ``data`` is what was validated: a limit set by another field (:class:`Bound`) is read from it."""
-    err = exc.errors(include_url=False)[0]
-    kind, value, ctx = err["type"], err.get("input"), err.get("ctx") or {}
-    key, model, owner, info, tuple_key, node, parent = section, cls, cls, None, section, data, None
-    if kind == "bound":
-        loc = (*err["loc"], ctx["field"])
-    else:
-        loc = err["loc"]
-    for part in loc:
-        if isinstance(part, int):
-            key += f"[{part}]"
-        elif isinstance(model, type) and issubclass(model, BaseModel) and part in model.model_fields:
-            info = model.model_fields[part]
-            key = tuple_key = f"{key}.{part}" if key else part
-            owner, parent, model = model, node, info.annotation
-            node = dict(node).get(part) if isinstance(node, (dict, BaseModel)) else None
-        elif kind == "extra_forbidden" and part == loc[-1]:  # the unknown key itself
-            key = f"{key}.{part}" if key else part
-    if kind == "extra_forbidden":
-        return f"unknown key `{key}` in params; expected one of: {', '.join(sorted(model.model_fields))}"
-    if kind in ("bound", "greater_than", "greater_than_equal", "less_than", "less_than_equal"):
-        bound = next((b for b in info.metadata if isinstance(b, Bound)), None)
-        if bound is None:
-            return f"`{key}` must be in {_range(info)}, got {value!r}"
-        prefix = tuple_key.rpartition(".")[0]
-        given = dict(parent) if isinstance(parent, (dict, BaseModel)) else {}
-        limit = ctx["limit"] if kind == "bound" else given.get(bound.other, owner.model_fields[bound.other].default)
-        value = ctx["value"] if kind == "bound" else value
-        side = "upper" if bound.op == "<=" else "lower"
-        return (f"`{tuple_key}` must be in {_range(info, bound, limit)}, got {value!r} (the {side} limit is "
-                f"`{prefix + '.' if prefix else ''}{bound.other}`)")
-    if kind == "literal_error":
-        return f"`{key}` must be one of {_choices(info.annotation)}, got {value!r}"
-    if kind in ("missing", "too_short", "too_long") and info is not None:
-        n = len(typing.get_args(info.annotation))
-        return f"`{tuple_key}` must be a list of {n} values, got {list(value) if isinstance(value, tuple) else value!r}"
-    if kind in _TYPE_WORDS:
-        return f"`{key}` must be {_TYPE_WORDS[kind]}, got {value!r}"
-    if kind == "model_type" and info is not None:
-        return f"`{key}` must be a {ctx.get('class_name', 'section')}, got {type(value).__name__}"
-    return f"`{key}`: {err['msg']}, got {value!r}"
-
-
-def from_mapping(cls: type[T], mapping: Any, section: str) -> T:
-    """Build the section model ``cls`` from a mapping, refusing unknown keys, wrong types and values out of range.
-
-    Parameters
-    ----------
-    cls : Section subclass
-        The model of the section.
-    mapping : dict or None
-        The section's keys; missing keys take the model defaults. YAML lists become tuples for tuple fields.
-    section : str
-        The dotted section name, used in messages (``"logo.match"``).
-
-    Returns
-    -------
-    Section
-        The validated, frozen parameters.
-
-    Raises
-    ------
-    InputError
-        One line naming the dotted key (``logo.match.ratio``) and its range or choices.
-
-    Examples
-    --------
-    >>> from_mapping(MatchParams, {"ratio": 0.7}, "homography.match").ratio
-    0.7
-    >>> from_mapping(StereoSgmParams, {"paths": 6}, "stereo.sgm")
-    Traceback (most recent call last):
-    ...
-    cvpipe.errors.InputError: `stereo.sgm.paths` must be one of [4, 8], got 6
-    """
-    if mapping is None:
-        mapping = {}
-    if not isinstance(mapping, dict):
-        raise InputError(f"params section `{section}` must be a mapping, got {type(mapping).__name__}")
-    fields = cls.model_fields
-    data = {k: tuple(v) if isinstance(v, list) and k in fields and typing.get_origin(fields[k].annotation) is tuple
-            else v for k, v in mapping.items()}
-    try:
-        return cls.model_validate(data)
-    except ValidationError as exc:
-        raise InputError(_message(cls, exc, section, data)) from exc
-
-
-def read_params_file(path: str | os.PathLike = "params.yaml") -> dict:
-    """The whole ``params.yaml`` as a dict (``yaml.safe_load``)."""
-    p = Path(path)
-    if not p.exists():
-        raise InputError(f"{p}: no such file")
-    try:
-        data = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        raise InputError(f"{p}: not valid YAML ({exc})") from exc
-    if data is None:
-        return {}
-    if not isinstance(data, dict):
-        raise InputError(f"{p}: expected a mapping of sections at the top level, got {type(data).__name__}")
-    return data
-
-
-def load_section(cls: type[T], section: str, path: str | os.PathLike = "params.yaml") -> T:
-    """Load the dotted ``section`` (``"logo.match"``) of ``params.yaml`` into ``cls``."""
-    node: Any = read_params_file(path)
-    for part in section.split("."):
-        if not isinstance(node, dict) or part not in node:
-            raise InputError(f"{path}: section `{section}` is missing")
-        node = node[part]
-    return from_mapping(cls, node, section)
 
 
 # --------------------------------------------------------------------------------------------- shared sections
@@ -296,14 +65,6 @@ class MatchParams(Section):
     cross_check: bool = False
 
 
-#: dotted params.yaml section -> model; the defaults test walks this table
-SECTIONS: dict[str, type[Section]] = {
-    "samples": SamplesParams,
-    "homography.features": FeaturesParams,
-    "homography.match": MatchParams,
-}
-
-
 # ---- homography ----
 
 
@@ -321,12 +82,6 @@ class HomographyReportParams(Section):
 
     success_px: float = Field(3.0, gt=0.0)
     checker_tiles: int = Field(8, ge=1, le=256)
-
-
-SECTIONS.update({
-    "homography.estimate": HomographyEstimateParams,
-    "homography.report": HomographyReportParams,
-})
 
 
 # ---- hough ----
@@ -357,13 +112,6 @@ class HoughReportParams(Section):
 
     rho_tol: float = Field(3.0, gt=0.0)
     theta_tol_deg: float = Field(1.5, gt=0.0, le=90.0)
-
-
-SECTIONS.update({
-    "hough.edges": HoughEdgesParams,
-    "hough.lines": HoughLinesParams,
-    "hough.report": HoughReportParams,
-})
 
 
 # ---- defect ----
@@ -416,15 +164,6 @@ class DefectRegionParams(Section):
     min_area: int = Field(12, ge=1, le=1_000_000)
     merge_distance: float = Field(8.0, ge=-1.0, le=1000.0)
     pad: float = Field(0.0, ge=0.0, le=1000.0)
-
-
-SECTIONS.update({
-    "defect.features": DefectFeaturesParams,
-    "defect.match": MatchParams,
-    "defect.register": DefectRegisterParams,
-    "defect.diff": DefectDiffParams,
-    "defect.regions": DefectRegionParams,
-})
 
 
 # `register` is also ABCMeta.register, which pydantic warns about; the field wins on instances, as it should
@@ -499,15 +238,6 @@ class PanoramaBlendParams(Section):
     gain_block: int = Field(32, ge=4, le=1024)
 
 
-SECTIONS.update({
-    "panorama.features": PanoramaFeaturesParams,
-    "panorama.match": PanoramaMatchParams,
-    "panorama.homographies": PanoramaHomographiesParams,
-    "panorama.warp": PanoramaWarpParams,
-    "panorama.blend": PanoramaBlendParams,
-})
-
-
 # ---- logo ----
 
 
@@ -530,7 +260,7 @@ class LogoMatchParams(Section):
     reference_features: Annotated[int, Bound(">=", "min_features")] = Field(1000, le=1_000_000)
 
 
-#: the geometric fitters of :data:`cvpipe.logos.MODELS`
+#: the geometric fitters of :data:`cvpipe.logo.MODELS`
 LogoModel = Literal["affine_homography", "homography"]
 
 
@@ -556,13 +286,6 @@ class LogoVerifyParams(Section):
     score_threshold: float = 0.0
     angle_tolerance: float = Field(30.0, gt=0.0, le=180.0)
     scale_tolerance: float = Field(2.0, gt=1.0, le=16.0)
-
-
-SECTIONS.update({
-    "logo.features": LogoFeaturesParams,
-    "logo.match": LogoMatchParams,
-    "logo.verify": LogoVerifyParams,
-})
 
 
 # ---- stereo ----
@@ -615,12 +338,10 @@ class StereoSgbmParams(Section):
     lr_max_diff: int = 1
 
 
-class StereoRectifyParams(Section):
+class StereoRectifyParams(FeaturesParams):
     """``stereo.rectify``: features, matching and the fundamental-matrix fit of :mod:`cvpipe.stereo.rectify`, and when a
     pair counts as already rectified (:func:`cvpipe.stereo.rectify.looks_rectified`)."""
 
-    detector: Detector = "sift"
-    max_features: int = Field(4000, ge=1, le=1_000_000)
     ratio: float = Field(0.8, gt=0.0, le=1.0)
     threshold: float = Field(1.0, gt=0.0, le=100.0)
     margin: float = Field(1.0, ge=0.0, le=1000.0)
@@ -639,17 +360,6 @@ class StereoReportParams(Section):
     """``stereo.report``: the absolute error (pixels) at which the error maps' colour saturates."""
 
     error_clip: float = Field(4.0, gt=0.0)
-
-
-SECTIONS.update({
-    "stereo.disparity": StereoDisparityParams,
-    "stereo.sgm": StereoSgmParams,
-    "stereo.opencv_bm": StereoBmParams,
-    "stereo.opencv_sgbm": StereoSgbmParams,
-    "stereo.report": StereoReportParams,
-    "stereo.rectify": StereoRectifyParams,
-    "stereo.depth": StereoDepthParams,
-})
 
 
 # ---- compute (where per-item work runs; never a parameter of a DVC stage: it does not change any result) ----
@@ -678,5 +388,18 @@ class ComputeParams(Section):
                                                "tcp://host:8786")
 
 
-# not listed in any stage's ``params:`` in dvc.yaml: changing it never reruns a stage
-SECTIONS["compute"] = ComputeParams
+#: dotted params.yaml section -> model; the defaults test walks this table. ``compute`` is in no stage's
+#: ``params:`` in dvc.yaml: where items run never changes a result, so changing it never reruns a stage
+SECTIONS: dict[str, type[Section]] = {
+    "samples": SamplesParams, "homography.features": FeaturesParams, "homography.match": MatchParams,
+    "homography.estimate": HomographyEstimateParams, "homography.report": HomographyReportParams,
+    "hough.edges": HoughEdgesParams, "hough.lines": HoughLinesParams, "hough.report": HoughReportParams,
+    "defect.features": DefectFeaturesParams, "defect.match": MatchParams, "defect.register": DefectRegisterParams,
+    "defect.diff": DefectDiffParams, "defect.regions": DefectRegionParams, "panorama.features": PanoramaFeaturesParams,
+    "panorama.match": PanoramaMatchParams, "panorama.homographies": PanoramaHomographiesParams,
+    "panorama.warp": PanoramaWarpParams, "panorama.blend": PanoramaBlendParams, "logo.features": LogoFeaturesParams,
+    "logo.match": LogoMatchParams, "logo.verify": LogoVerifyParams, "stereo.disparity": StereoDisparityParams,
+    "stereo.sgm": StereoSgmParams, "stereo.opencv_bm": StereoBmParams, "stereo.opencv_sgbm": StereoSgbmParams,
+    "stereo.report": StereoReportParams, "stereo.rectify": StereoRectifyParams, "stereo.depth": StereoDepthParams,
+    "compute": ComputeParams,
+}
