@@ -17,6 +17,7 @@ resolution first.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Sequence
 
@@ -24,7 +25,7 @@ import cv2
 import numpy as np
 
 from ..errors import BudgetError, EstimationError, memory_budget
-from .features import rescale_homographies, resize, resized_size, scale_for
+from .features import _workers, rescale_homographies, resize, resized_size, scale_for
 
 if TYPE_CHECKING:
     from .register import Registration
@@ -260,13 +261,12 @@ def warp_images(images: Sequence[np.ndarray], G: Sequence[np.ndarray], projectio
             f"the {projection} canvas would be {W}x{H} pixels (> max_canvas_megapix {max_canvas_megapix}); the "
             "views are too wide for this projection: use cylindrical or spherical, or lower compose_megapix")
     check_canvas_memory((W, H), boxes, projection, max_canvas_megapix)
-    out_imgs, out_masks, corners = [], [], []
-    for img, Gi, box in zip(images, G, boxes):
-        warped, mask = warp_image(img, Gi, box, projection, focal, ref_size)
-        out_imgs.append(warped)
-        out_masks.append(mask)
-        corners.append((int(box[0]) - ox, int(box[1]) - oy))
-    return Warped(out_imgs, out_masks, corners, (W, H), (ox, oy))
+    # one image per thread: cv2.remap and numpy's arithmetic on large arrays release the GIL
+    with ThreadPoolExecutor(_workers()) as pool:
+        done = list(pool.map(lambda k: warp_image(images[k], G[k], boxes[k], projection, focal, ref_size),
+                             range(len(images))))
+    corners = [(int(box[0]) - ox, int(box[1]) - oy) for box in boxes]
+    return Warped([d[0] for d in done], [d[1] for d in done], corners, (W, H), (ox, oy))
 
 
 #: pixels the multiband blend adds to each side of a box and of the canvas (``2 * 2**bands`` of padding and up to
