@@ -7,7 +7,9 @@ from the match graph, "direct", and the pair composed from the global homographi
 measure (mean absolute grey difference of the overlapping warped images, after gain compensation) and the time of
 both, measured in the same process, interleaved, after a warm-up run, at the same registration and compose
 resolutions. What a user waits for is also measured: the whole ``cvpipe stitch`` command in a subprocess (Python
-start-up, imports, numba cache loading, reading, stitching, writing), against ``cv2.Stitcher`` in this process.
+start-up, imports, numba cache loading, reading, stitching, writing), against ``cv2.Stitcher`` in this process, in
+wall time and in CPU time (user + system of all threads: the command's from ``getrusage`` of the finished child,
+``cv2.Stitcher``'s from this process's CPU clock), which a busy shared machine distorts much less.
 On the sets of :data:`EXPOSURE_SETS` every exposure compensator (:data:`cvpipe.panorama.GAIN_CHOICES`) blends the
 same warped images, and the colour difference across the seam in the sky is measured (:func:`seam_colour_difference`).
 """
@@ -17,6 +19,7 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import resource
 import statistics
 import subprocess
 import sys
@@ -240,16 +243,22 @@ def _compare_exposure(w, name: str, out: str | None) -> dict:
     return found
 
 
-def _run_command(paths: list[Path], projection: str, out: Path) -> float:
-    """Wall time of the whole ``cvpipe stitch`` command on ``paths`` in a fresh Python process, seconds."""
+def _children_cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def _run_command(paths: list[Path], projection: str, out: Path) -> tuple[float, float]:
+    """Wall and CPU time (user + system, all threads) of the whole ``cvpipe stitch`` command on ``paths`` in a fresh
+    Python process, seconds."""
     cmd = [sys.executable, "-m", "cvpipe.cli", "-q", "stitch", *map(str, paths), "-o", str(out),
            "--projection", projection]
-    t = time.perf_counter()
+    cpu, t = _children_cpu(), time.perf_counter()
     done = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, check=False)
-    seconds = time.perf_counter() - t
+    seconds, cpu = time.perf_counter() - t, _children_cpu() - cpu
     if done.returncode not in (0, 1):  # 1: no panorama, which the in-process run reports as well
         raise InputError(f"`cvpipe stitch` failed on {paths[0].parent}: {done.stderr.strip()[-300:]}")
-    return seconds
+    return seconds, cpu
 
 
 def _run_ours(images, cfg):
@@ -285,23 +294,28 @@ def run(args: argparse.Namespace) -> int:
         sizes = [(im.shape[1], im.shape[0]) for im in images]
         ours, err = _run_ours(images, cfg)  # warm-up run, also the result reported
         cv = panorama.opencv_stitch(images, feats.work_megapix, warp.compose_megapix, match.min_confidence)
-        t_ours, t_cv, t_cmd = [], [], []
+        t_ours, t_cv, t_cmd, cpu_cv, cpu_cmd = [], [], [], [], []
         with tempfile.TemporaryDirectory() as tmp:
             _run_command(paths, args.projection, Path(tmp) / "pano.png")  # warm-up: the numba cache on disk
             for _ in range(args.repeat):  # interleaved, so all three see the same machine load
                 t = time.perf_counter()
                 _run_ours(images, cfg)
                 t_ours.append(time.perf_counter() - t)
-                t = time.perf_counter()
+                cpu, t = time.process_time(), time.perf_counter()
                 panorama.opencv_stitch(images, feats.work_megapix, warp.compose_megapix, match.min_confidence)
                 t_cv.append(time.perf_counter() - t)
-                t_cmd.append(_run_command(paths, args.projection, Path(tmp) / "pano.png"))
+                cpu_cv.append(time.process_time() - cpu)
+                wall, cpu = _run_command(paths, args.projection, Path(tmp) / "pano.png")
+                t_cmd.append(wall)
+                cpu_cmd.append(cpu)
         row = {"set": name, "images": len(files), "ours_ok": ours is not None, "ours_error": err,
                "opencv_status": cv[0], "opencv_used": [files[k] for k in cv[2]],
                "ours_seconds": statistics.median(t_ours), "opencv_seconds": statistics.median(t_cv),
-               "command_seconds": statistics.median(t_cmd)}
+               "command_seconds": statistics.median(t_cmd), "opencv_cpu_seconds": statistics.median(cpu_cv),
+               "command_cpu_seconds": statistics.median(cpu_cmd)}
         row["time_ratio"] = row["ours_seconds"] / row["opencv_seconds"]
         row["command_ratio"] = row["command_seconds"] / row["opencv_seconds"]
+        row["command_cpu_ratio"] = row["command_cpu_seconds"] / row["opencv_cpu_seconds"]
         if ours is not None:
             reg = ours.registration
             dropped = {files[k]: why for k, why in reg.dropped}
@@ -332,6 +346,7 @@ def run(args: argparse.Namespace) -> int:
         "all_stitched": all(r["ours_ok"] for r in results),
         "time_ratio_total": sum(r["ours_seconds"] for r in results) / sum(r["opencv_seconds"] for r in results),
         "command_ratio_max": max(r["command_ratio"] for r in results),
+        "command_cpu_ratio_max": max(r["command_cpu_ratio"] for r in results),
         "load_average": list(os.getloadavg()),
     }
     adobe = [r for r in results if r.get("corner_error_median") is not None]
@@ -349,7 +364,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"{'set':15s} {'ours':>5s} {'cv2':>28s} {'used':>5s} {'direct px':>9s} {'dir/comp':>8s} {'corner px':>9s} "
           f"{'adj px':>7s} "
           f"{'ovl px':>7s} {'empty':>6s} {'ghost':>6s} {'ours s':>7s} {'cv2 s':>6s} {'ratio':>5s} {'cmd s':>6s} "
-          f"{'cmd/cv2':>7s}")
+          f"{'cmd/cv2':>7s} {'cmd cpu':>7s} {'cv2 cpu':>7s} {'cpu/cv2':>7s}")
     fmt = (lambda v, f: "-" if v is None else format(v, f))
     for r in results:
         print(f"{r['set']:15s} {str(r['ours_ok']):>5s} {r['opencv_status'] + ' ' + str(len(r['opencv_used'])):>28s} "
@@ -360,12 +375,13 @@ def run(args: argparse.Namespace) -> int:
               f"{fmt(r.get('overlap_error_median'), '.2f'):>7s} "
               f"{fmt(r.get('empty_share'), '.3f'):>6s} {fmt(r.get('ghosting'), '.2f'):>6s} "
               f"{r['ours_seconds']:7.2f} {r['opencv_seconds']:6.2f} {r['time_ratio']:5.2f} "
-              f"{r['command_seconds']:6.2f} {r['command_ratio']:7.2f}")
+              f"{r['command_seconds']:6.2f} {r['command_ratio']:7.2f} {r['command_cpu_seconds']:7.2f} "
+              f"{r['opencv_cpu_seconds']:7.2f} {r['command_cpu_ratio']:7.2f}")
         for f, why in r.get("dropped", {}).items():
             print(f"{'':15s} dropped {f}: {why}")
     print(f"total time ratio ours / cv2.Stitcher: {summary['time_ratio_total']:.2f}; the `cvpipe stitch` command "
           f"(subprocess, imports included) / cv2.Stitcher in this process: at most "
-          f"{summary['command_ratio_max']:.2f}; load average {' '.join(f'{v:.1f}' for v in summary['load_average'])}")
+          f"{summary['command_ratio_max']:.2f} in wall time, {summary['command_cpu_ratio_max']:.2f} in CPU time; load average {' '.join(f'{v:.1f}' for v in summary['load_average'])}")
     for r in results:
         if r.get("exposure"):
             print(f"{r['set']}: colour difference across the seam in the top {SKY_ROWS:.0%} of the rows (CIELAB; "

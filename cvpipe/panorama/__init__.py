@@ -157,6 +157,8 @@ def stitch(images: Sequence[np.ndarray], features: PanoramaFeaturesParams = Pano
     comp = compose_inputs(images, reg, work_sizes, warp.compose_megapix)
     warped = warp_images(comp.images, comp.G, warp.projection, comp.focal, comp.ref_size,
                                  warp.max_canvas_megapix)
+    comp_G, comp_sizes = comp.G, comp.sizes
+    del comp  # the resized copies: the blend is the memory peak, they need not be alive through it
     t["warp"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     pano, mask, seams = compose(warped, blend.blender, blend.bands, blend.gain_compensation,
@@ -172,6 +174,6 @@ def stitch(images: Sequence[np.ndarray], features: PanoramaFeaturesParams = Pano
     full_sizes = [(img.shape[1], img.shape[0]) for img in images]
     H_full = {}
     for k, a in enumerate(reg.used):
-        H_full[a] = comp.G[k] @ resize_matrix(full_sizes[a], comp.sizes[k])
+        H_full[a] = comp_G[k] @ resize_matrix(full_sizes[a], comp_sizes[k])
     return Panorama(pano[y:y + h, x:x + w], mask[y:y + h, x:x + w], seams[y:y + h, x:x + w], reg, H_full,
                     to_pano, tuple(int(v) for v in rect), t, graph)

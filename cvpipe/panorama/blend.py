@@ -299,17 +299,21 @@ def blend_multiband(w: Warped, labels: np.ndarray, bands: int, gains=None) -> np
         h, ww = mask.shape
         sub = np.zeros((ay1 - ay0, ax1 - ax0, 3), np.float32)
         m = np.zeros((ay1 - ay0, ax1 - ax0), np.float32)
-        weight = np.zeros_like(m)
         sl = (slice(y - ay0, y - ay0 + h), slice(x - ax0, x - ax0 + ww))
         im = img if img.ndim == 3 else cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
         # warped images are 0 outside their mask, so image * mask is the gained image itself
         np.multiply(im, _gain_of(g, k), out=sub[sl], casting="unsafe")
         m[sl] = mask > 0
         own = labels[y:y + h, x:x + ww] == k
+        # level 0 copies `own` pixels; only the coarser levels need the float weight, so level 0's is built, shrunk
+        # and dropped before the first Laplacian level exists (memory: the full-size box arrays are the peak)
+        weight = np.zeros_like(m)
         weight[sl] = own
+        weight = cv2.pyrDown(weight)
         # normalised pyramids (image * mask and mask blurred together, then divided) extend each level smoothly
         # past the image border, so no artificial black edge leaks into the blend
         gm, gw, norm = sub, m, sub
+        del sub, m
         for lev in range(bands + 1):
             if lev < bands:
                 gm, gw = cv2.pyrDown(gm), cv2.pyrDown(gw)
@@ -330,18 +334,26 @@ def blend_multiband(w: Warped, labels: np.ndarray, bands: int, gains=None) -> np
                 dst = wsum[lev][oy:oy + hh, ox:ox + wl]
                 cv2.add(dst, weight, dst=dst)
             if lev < bands:
-                weight, norm = cv2.pyrDown(weight), nxt
+                norm = nxt
+                if lev > 0:  # level 0's weight was shrunk before the loop
+                    weight = cv2.pyrDown(weight)
+            del lap
+        del gm, gw, norm, nxt, own
     out = None
     for lev in range(bands, -1, -1):
         level = acc[lev] if lev == 0 else cv2.divide(acc[lev], _three(np.maximum(wsum[lev], 1e-8)))
+        acc[lev] = wsum[lev] = None  # each level is freed once collapsed (memory: the canvas arrays are the peak)
         if out is None:
             out = level
         else:
             out = cv2.pyrUp(out, dstsize=(level.shape[1], level.shape[0]))
             cv2.add(out, level, dst=out)
+        del level
     out = out[-gy0:-gy0 + H, -gx0:-gx0 + W]
-    # round and saturate to uint8 (convertScaleAbs rounds; negatives are clipped to 0 first)
-    pano = cv2.convertScaleAbs(np.maximum(out, 0))
+    # round and saturate to uint8 (convertScaleAbs rounds; negatives are clipped to 0 first, in place)
+    np.maximum(out, 0, out=out)
+    pano = cv2.convertScaleAbs(out)
+    del out
     pano[labels < 0] = 0
     return pano
 

@@ -17,6 +17,7 @@ resolution first.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Sequence
 
@@ -24,7 +25,7 @@ import cv2
 import numpy as np
 
 from ..errors import BudgetError, EstimationError, memory_budget
-from .features import rescale_homographies, resize, resized_size, scale_for
+from .features import _workers, rescale_homographies, resize, resized_size, scale_for
 
 if TYPE_CHECKING:
     from .register import Registration
@@ -188,6 +189,10 @@ class Warped:
     origin: tuple
 
 
+#: canvas pixels warped per strip by :func:`warp_image` (bounds its temporary float maps to a few tens of MB)
+WARP_STRIP_PIXELS = 1 << 20
+
+
 def warp_image(img: np.ndarray, G: np.ndarray, box: Sequence[int], projection: str, focal: float,
                ref_size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """Warp one image onto the panorama box ``[x0, y0, x1, y1]``.
@@ -198,18 +203,26 @@ def warp_image(img: np.ndarray, G: np.ndarray, box: Sequence[int], projection: s
     mask : (y1 - y0, x1 - x0) uint8, 255 where the image has a pixel
     """
     x0, y0, x1, y1 = (int(b) for b in box)
+    warped = np.empty((y1 - y0, x1 - x0) + img.shape[2:], img.dtype)
+    mask = np.empty((y1 - y0, x1 - x0), np.uint8)
     # float32 keeps 1e-3 px precision on canvases of thousands of pixels at half the cost
     u = np.arange(x0, x1, dtype=np.float32)[None, :]
-    v = np.arange(y0, y1, dtype=np.float32)[:, None]
-    x, y, ok = canvas_to_image(u, v, G, projection, focal, ref_size)
     h, w = img.shape[:2]
-    # half a pixel of slack: the border samples themselves belong to the image
-    ok &= (x > -0.5) & (x < w - 0.5) & (y > -0.5) & (y < h - 0.5)
-    mx = np.where(ok, x, np.float32(-10)).astype(np.float32, copy=False)
-    my = np.where(ok, y, np.float32(-10)).astype(np.float32, copy=False)
-    warped = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    warped[~ok] = 0
-    return warped, ok.astype(np.uint8) * 255
+    # in strips of rows: the float maps of a whole box cost about 40 B per pixel, a strip's stay small
+    rows = max(1, WARP_STRIP_PIXELS // max(1, x1 - x0))
+    for r0 in range(y0, y1, rows):
+        r1 = min(y1, r0 + rows)
+        v = np.arange(r0, r1, dtype=np.float32)[:, None]
+        x, y, ok = canvas_to_image(u, v, G, projection, focal, ref_size)
+        # half a pixel of slack: the border samples themselves belong to the image
+        ok &= (x > -0.5) & (x < w - 0.5) & (y > -0.5) & (y < h - 0.5)
+        mx = np.where(ok, x, np.float32(-10)).astype(np.float32, copy=False)
+        my = np.where(ok, y, np.float32(-10)).astype(np.float32, copy=False)
+        out = warped[r0 - y0:r1 - y0]
+        cv2.remap(img, mx, my, cv2.INTER_LINEAR, dst=out, borderMode=cv2.BORDER_REPLICATE)
+        out[~ok] = 0
+        np.multiply(ok, np.uint8(255), out=mask[r0 - y0:r1 - y0], casting="unsafe")
+    return warped, mask
 
 
 def warp_images(images: Sequence[np.ndarray], G: Sequence[np.ndarray], projection: str, focal: float,
@@ -248,13 +261,12 @@ def warp_images(images: Sequence[np.ndarray], G: Sequence[np.ndarray], projectio
             f"the {projection} canvas would be {W}x{H} pixels (> max_canvas_megapix {max_canvas_megapix}); the "
             "views are too wide for this projection: use cylindrical or spherical, or lower compose_megapix")
     check_canvas_memory((W, H), boxes, projection, max_canvas_megapix)
-    out_imgs, out_masks, corners = [], [], []
-    for img, Gi, box in zip(images, G, boxes):
-        warped, mask = warp_image(img, Gi, box, projection, focal, ref_size)
-        out_imgs.append(warped)
-        out_masks.append(mask)
-        corners.append((int(box[0]) - ox, int(box[1]) - oy))
-    return Warped(out_imgs, out_masks, corners, (W, H), (ox, oy))
+    # one image per thread: cv2.remap and numpy's arithmetic on large arrays release the GIL
+    with ThreadPoolExecutor(_workers()) as pool:
+        done = list(pool.map(lambda k: warp_image(images[k], G[k], boxes[k], projection, focal, ref_size),
+                             range(len(images))))
+    corners = [(int(box[0]) - ox, int(box[1]) - oy) for box in boxes]
+    return Warped([d[0] for d in done], [d[1] for d in done], corners, (W, H), (ox, oy))
 
 
 #: pixels the multiband blend adds to each side of a box and of the canvas (``2 * 2**bands`` of padding and up to
@@ -270,13 +282,14 @@ CANVAS_BYTES_PER_PIXEL = 2
 #: bytes per pixel of each warped image's box kept until the blend ends: the uint8 BGR image and its mask
 WARPED_BYTES_PER_PIXEL = 4
 #: bytes per pixel of the padded box of the image being blended, alive while its pyramid is built: float32 image
-#: (12 B), mask (4 B) and seam weight (4 B), the first Laplacian level (12 B), the next Gaussian levels of image,
-#: mask and normalised image (3 + 1 + 3 B) and the ownership mask (1 B) = 40 B
-BLEND_BOX_BYTES_PER_PIXEL = 40
+#: (12 B), the first Laplacian level (12 B), the next Gaussian levels of image, mask and normalised image
+#: (3 + 1 + 3 B), the next level's seam weight (1 B), the ownership mask (1 B) and the 3-channel copy of the
+#: normaliser (3 B) = 36 B (the full-size float mask and weight are dropped before the Laplacian level exists)
+BLEND_BOX_BYTES_PER_PIXEL = 36
 #: bytes per pixel when the pyramid collapses at the end of the blend: the full-size float32 BGR result of the
-#: last ``pyrUp`` over the padded canvas (12 B), then over the canvas its ``np.maximum(out, 0)`` copy (12 B) and
-#: the uint8 panorama (3 B)
-COLLAPSE_PADDED_BYTES_PER_PIXEL, COLLAPSE_BYTES_PER_PIXEL = 12, 15
+#: last ``pyrUp`` over the padded canvas (12 B; clipped at 0 in place), then over the canvas the uint8 panorama
+#: (3 B)
+COLLAPSE_PADDED_BYTES_PER_PIXEL, COLLAPSE_BYTES_PER_PIXEL = 12, 3
 #: the arrays counted above leave out OpenCV's and numpy's short-lived intermediate results (``np.maximum`` and
 #: ``cv2.merge`` copies of the weights, comparison masks): tracemalloc measured peaks up to 10% above the count
 #: (3.7 MP canvases), hence this margin
@@ -303,7 +316,7 @@ def canvas_memory(size: tuple[int, int], boxes: np.ndarray) -> int:
     Examples
     --------
     >>> canvas_memory((1000, 1000), np.array([[0, 0, 600, 1000], [400, 0, 1000, 1000]]))
-    80658828
+    76316134
     """
     W, H = size
     sides = [(int(b[2]) - int(b[0]), int(b[3]) - int(b[1])) for b in boxes]
