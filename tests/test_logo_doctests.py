@@ -1,4 +1,4 @@
-"""The Examples sections of the logo package and of the shared geometry helpers run as doctests."""
+"""The Examples sections of the logo package and of the shared geometry and metrics helpers run as doctests."""
 
 import doctest
 import importlib
@@ -6,7 +6,7 @@ import importlib
 import pytest
 
 # by module name: `cvpipe.logo.verify` the attribute is the re-exported function, not the module
-MODULES = ["cvpipe.geometry", "cvpipe.logo.detect", "cvpipe.logo.verify", "cvpipe.logo.report"]
+MODULES = ["cvpipe.geometry", "cvpipe.metrics", "cvpipe.logo.detect", "cvpipe.logo.verify", "cvpipe.logo.report"]
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -272,3 +272,13 @@ def test_bools_and_strings_refused_for_numbers(section, cls, name, tp):
     if tp is float and float(default).is_integer():  # 3 is accepted for 3.0, and stored as a float
         got = getattr(from_mapping(cls, {name: int(default)}, section), name)
         assert got == default and isinstance(got, float)
+
+
+def test_examples_run():
+    """The Examples sections of the params machinery (Section.replace, from_mapping) are true."""
+    import doctest
+
+    from cvpipe.params import base
+
+    result = doctest.testmod(base, optionflags=doctest.NORMALIZE_WHITESPACE)
+    assert result.attempted > 0 and result.failed == 0, result

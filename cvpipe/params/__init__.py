@@ -2,9 +2,10 @@
 
 Each stage's parameters are one model (a :class:`Section`) whose field names are exactly the keys of its
 ``params.yaml`` section. Every default, range and choice is declared once, on its field: ``Field(ge=..., le=...)``
-for a range, ``Literal[...]`` for a choice, and :class:`Bound` for a limit set by another field of the same section
-(``canny_high`` >= ``canny_low``). The CLI reuses the defaults; a test checks that ``params.yaml`` agrees, and the
-message tests are generated from these declarations. Unknown, mistyped or out-of-range keys are refused with an
+for a range (a range that several sections share once, as a named type such as :data:`Ratio`), ``Literal[...]`` for
+a choice, and :class:`Bound` for a limit set by another field of the same section (``canny_high`` >= ``canny_low``).
+The CLI reuses the defaults; a test checks that ``params.yaml`` agrees, and the message tests are generated from
+these declarations. Unknown, mistyped or out-of-range keys are refused with an
 :class:`~cvpipe.errors.InputError` of one line that names the dotted key and what it accepts (```hough.lines.rho`
 must be in (0.0, 100.0], got -1``); the same check runs when Python code builds a model directly, and the message
 then names the bare field. Types are strict: ``true`` and ``"3"`` are not numbers, ``3.0`` is not an integer, but
@@ -39,6 +40,16 @@ from .base import Bound, Section, from_mapping, load_section, read_params_file, 
 #: the feature detectors of :data:`cvpipe.features.DETECTORS` (a test keeps the two equal)
 Detector = Literal["sift", "orb", "brisk", "akaze"]
 
+# ranges shared by fields of several sections, each declared once
+#: the keypoints kept per image
+MaxFeatures = Annotated[int, Field(ge=1, le=1_000_000)]
+#: Lowe's ratio test: best / second-best descriptor distance
+Ratio = Annotated[float, Field(gt=0.0, le=1.0)]
+#: a normalized correlation coefficient
+Correlation = Annotated[float, Field(ge=-1.0, le=1.0)]
+#: a morphology radius in pixels
+Radius = Annotated[int, Field(ge=0, le=50)]
+
 
 # --------------------------------------------------------------------------------------------- shared sections
 
@@ -55,13 +66,13 @@ class FeaturesParams(Section):
     """Keypoint detection (``<task>.features``)."""
 
     detector: Detector = "sift"
-    max_features: int = Field(4000, ge=1, le=1_000_000)
+    max_features: MaxFeatures = 4000
 
 
 class MatchParams(Section):
     """Descriptor matching (``<task>.match``)."""
 
-    ratio: float = Field(0.8, gt=0.0, le=1.0)
+    ratio: Ratio = 0.8
     cross_check: bool = False
 
 
@@ -121,7 +132,7 @@ class DefectFeaturesParams(FeaturesParams):
     """``defect.features``: ORB is 10x faster than SIFT here and ECC does the fine alignment anyway."""
 
     detector: Detector = "orb"
-    max_features: int = Field(1000, ge=1, le=1_000_000)
+    max_features: MaxFeatures = 1000
 
 
 class DefectRegisterParams(Section):
@@ -136,10 +147,10 @@ class DefectRegisterParams(Section):
     ecc_scale: float = Field(0.5, gt=0.0, le=1.0)
     ecc_iterations: int = Field(25, ge=1, le=10_000)
     ecc_eps: float = Field(1e-4, gt=0.0, le=1.0)
-    min_correlation: float = Field(0.5, ge=-1.0, le=1.0)
+    min_correlation: Correlation = 0.5
     direct_fallback: bool = True
-    direct_min_correlation: float = Field(0.8, ge=-1.0, le=1.0)
-    retry_correlation: float = Field(0.95, ge=-1.0, le=1.0)
+    direct_min_correlation: Correlation = 0.8
+    retry_correlation: Correlation = 0.95
     seed: int = 0
 
 
@@ -157,10 +168,10 @@ class DefectRegionParams(Section):
 
     threshold: float = Field(0.15, gt=0.0, le=1.0)
     seed_threshold: Annotated[float, Bound(">=", "threshold")] = Field(0.3, le=1.0)
-    seed_radius: int = Field(1, ge=0, le=50)
+    seed_radius: Radius = 1
     noise_factor: float = Field(6.0, ge=0.0, le=100.0)
-    open_radius: int = Field(1, ge=0, le=50)
-    close_radius: int = Field(5, ge=0, le=50)
+    open_radius: Radius = 1
+    close_radius: Radius = 5
     min_area: int = Field(12, ge=1, le=1_000_000)
     merge_distance: float = Field(8.0, ge=-1.0, le=1000.0)
     pad: float = Field(0.0, ge=0.0, le=1000.0)
@@ -189,12 +200,11 @@ def load_inspect_params(path: str | os.PathLike = "params.yaml") -> InspectParam
 # ---------------------------------------------------------------------------------------------------- panorama
 
 
-class PanoramaFeaturesParams(Section):
+class PanoramaFeaturesParams(FeaturesParams):
     """``panorama.features``: features at the registration resolution (``work_megapix`` million pixels, <= 0 means
     full resolution; ``cv2.Stitcher`` uses 0.6)."""
 
-    detector: Detector = "sift"
-    max_features: int = Field(1500, ge=1, le=1_000_000)
+    max_features: MaxFeatures = 1500
     work_megapix: float = Field(0.6, le=1000.0)
 
 
@@ -203,7 +213,7 @@ class PanoramaMatchParams(Section):
     image's ``candidates`` most promising partners are matched in full (0: every pair). An accepted pair's
     homography is refitted on its inliers with the tighter ``refit_threshold`` (0: no refit)."""
 
-    ratio: float = Field(0.8, gt=0.0, le=1.0)
+    ratio: Ratio = 0.8
     ransac_threshold: float = Field(3.0, gt=0.0)
     min_inliers: int = Field(10, ge=4)
     min_confidence: float = Field(1.0, ge=0.0)
@@ -253,7 +263,7 @@ class LogoFeaturesParams(FeaturesParams):
 class LogoMatchParams(Section):
     """``logo.match``: scene -> gallery matching (see :func:`cvpipe.logo.match_scene`)."""
 
-    ratio: float = Field(0.95, gt=0.0, le=1.0)
+    ratio: Ratio = 0.95
     k: int = Field(8, ge=2, le=100)
     per_reference: Annotated[int, Bound("<=", "k")] = Field(1, ge=1)
     min_features: int = Field(8, ge=4, le=100_000)
@@ -342,7 +352,7 @@ class StereoRectifyParams(FeaturesParams):
     """``stereo.rectify``: features, matching and the fundamental-matrix fit of :mod:`cvpipe.stereo.rectify`, and when a
     pair counts as already rectified (:func:`cvpipe.stereo.rectify.looks_rectified`)."""
 
-    ratio: float = Field(0.8, gt=0.0, le=1.0)
+    ratio: Ratio = 0.8
     threshold: float = Field(1.0, gt=0.0, le=100.0)
     margin: float = Field(1.0, ge=0.0, le=1000.0)
     seed: int = Field(0, ge=0)
