@@ -71,6 +71,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "view and compare our uncalibrated rectification with OpenCV's "
                              "(cvpipe.bench.stereo_rectify)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the unrectifying transforms (--rectify)")
+    parser.add_argument("--seeds", type=int, default=1,
+                        help="with --rectify: repeat the protocol with the unrectifying seeds SEED .. SEED+N-1")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
 
 
