@@ -27,7 +27,7 @@ The package takes arrays only; reading the gallery folder lives in the command, 
 recipe: :func:`recognize`, :func:`every_logo`) and ``report`` (evaluation, stage records, pictures).
 """
 
-from .detect import DEFAULT_EXTRA_SCORE, MAX_OVERLAP, Detection, decide, every_logo, quad_iou, recognize
+from .detect import DEFAULT_EXTRA_SCORE, MAX_OVERLAP, Detection, decide, every_logo, quad_iou, recognize, verify_scene
 from .gallery import Gallery, Reference, build_gallery
 from .match import Matches, match_scene
 from .report import (NO_TRUTH, confusion, draw_confusion, draw_detection, evaluate, evaluate_records, found_counts,
@@ -43,5 +43,5 @@ __all__ = [
     "evaluate_records", "every_logo", "fit_affine", "found_counts", "found_plot", "map_poses", "match_scene",
     "merge_dropped", "metric_key", "metrics_of", "pick_method", "pose_agrees", "pose_probability", "pr_rows",
     "quad_error", "quad_iou", "recognize", "report_summary",
-    "scene_record", "shape_problem", "significance", "verify",
+    "scene_record", "shape_problem", "significance", "verify", "verify_scene",
 ]
