@@ -2,6 +2,7 @@
 uncached timings)."""
 
 import math
+from pathlib import Path
 
 from cvpipe import hough, io
 from stages._runner import Stage, run
@@ -9,17 +10,17 @@ from stages._runner import Stage, run
 
 def hough_lines(st: Stage) -> None:
     p = st.params
-    fn = hough.get_impl(st.args.method)
     kwargs = {"refine": p.refine} if st.args.method == "ours" else {}
     theta = math.radians(p.theta_deg)
+    files = io.list_images(st.args.edges)
     images = []
-    for f in st.progress(io.list_images(st.args.edges), f"hough lines {st.args.method}"):
-        edges = io.read_image(f, "gray")
-        with st.timer("first_call" if not images else "calls"):  # ours' first: numba compile or cache load
-            lines = fn(edges, p.rho, theta, p.threshold, **kwargs)
-        st.timings[f"median.{f.stem}"] = hough.median_seconds(
-            lambda: fn(edges, p.rho, theta, p.threshold, **kwargs), p.repeats)
-        images.append({"file": f.name, "lines": lines.tolist()})
+    for name, (lines, first, median) in st.map(hough.lines_item, (io.read_image(f, "gray") for f in files),
+                                               shared=(st.args.method, p), desc=f"hough lines {st.args.method}",
+                                               names=[f.name for f in files]):
+        key = "first_call" if not images else "calls"  # ours' first: numba compile or cache load
+        st.timings[key] = st.timings.get(key, 0.0) + first
+        st.timings[f"median.{Path(name).stem}"] = median
+        images.append({"file": name, "lines": lines.tolist()})
     io.save_json(st.args.out, {"impl": st.args.method, "rho": p.rho, "theta": theta, "threshold": p.threshold,
                                "refine": bool(kwargs.get("refine", False)), "images": images})
     st.made(f"{sum(len(i['lines']) for i in images)} lines in {len(images)} images -> {st.args.out}")
