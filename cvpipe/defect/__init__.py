@@ -34,9 +34,9 @@ from .register import (ProbeRegistration, register_direct, register_item, regist
 from .report import draw_regions, evaluate, heat_map
 
 __all__ = ["VERDICTS", "Difference", "InspectParams", "Inspection", "ProbeRegistration", "choose", "compare",
-           "difference", "difference_item", "draw_regions", "evaluate", "find_regions", "fit_gain_bias", "heat_map", "inspect",
-           "load_inspect_params", "map_boxes", "merge_boxes", "register_direct", "register_item", "register_probe",
-           "regions_item", "wants_alternative", "warp_probe", "warp_to_reference"]
+           "difference", "difference_item", "draw_regions", "evaluate", "find_regions", "fit_gain_bias", "heat_map",
+           "inspect", "load_inspect_params", "map_boxes", "merge_boxes", "register_direct", "register_item",
+           "register_probe", "regions_item", "wants_alternative", "warp_probe", "warp_to_reference"]
 
 
 def compare(reference: np.ndarray, warped: np.ndarray, valid: np.ndarray, registration: ProbeRegistration,
