@@ -5,7 +5,6 @@ Writes `decisions.json` (one record per scene, see `cvpipe.logo.scene_record`), 
 the best plausible hypothesis, and `dropped.json` (what `logo_match` and this stage did not process, and why).
 """
 
-import dataclasses
 from pathlib import Path
 
 from cvpipe import datasets, io, logo
@@ -42,10 +41,8 @@ def logo_verify(st: Stage) -> None:
     # a dropped scene is named by its file, as logo_match names it (or by its name when the file is gone)
     names = [rel[n].as_posix() if n in rel else n for n in index["scenes"]]
     scene_of = {rel[n].as_posix(): scenes[n] for n in rel}
-    # verification never matches: the trained OpenCV matcher (which cannot be pickled) stays here
-    shared = (dataclasses.replace(gallery, matcher=None), vp)
     records = []
-    for item, (det, scene_xy, seconds) in st.map(logo.verify_scene, scene_data(), shared=shared,
+    for item, (det, scene_xy, seconds) in st.map(logo.verify_scene, scene_data(), shared=(gallery, vp),
                                                  desc=f"verify {a.detector}", names=names):
         sc = scene_of[item]
         st.timings["verify"] = st.timings.get("verify", 0.0) + seconds

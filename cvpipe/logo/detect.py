@@ -177,8 +177,7 @@ def verify_scene(item: tuple, shared: tuple) -> tuple[Detection, np.ndarray | No
     item : tuple
         ``(Matches, scene Features, (width, height))``.
     shared : tuple
-        ``(Gallery, LogoVerifyParams)``, sent once per worker. Verification never matches, so the gallery's
-        ``matcher`` may be None (the trained OpenCV matcher cannot be pickled).
+        ``(Gallery, LogoVerifyParams)``, sent once per worker.
 
     Returns
     -------
