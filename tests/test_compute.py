@@ -21,7 +21,7 @@ from cvpipe.errors import EstimationError, InputError
 from cvpipe.params import ComputeParams, from_mapping
 
 from test_defects import board, make_probe, motion
-from test_logos import PERSP, _scene, _view, gallery_dir, marks  # noqa: F401 - fixtures used below
+from test_logos import PERSP, _scene, _view, gallery, gallery_dir, marks  # noqa: F401 - fixtures used below
 
 pytestmark = pytest.mark.timeout(600)  # a cluster run that stalls fails here, not after the suite-wide 1500 s
 
@@ -457,11 +457,29 @@ def test_stage_map_without_compute_section_runs_in_process(tmp_path, repo_root):
 
 # ------------------------------------------------------------------- every stage that fans out, byte for byte
 
+
+def test_gallery_travels_to_a_worker_and_matches_the_same(gallery, marks):
+    """A logo gallery crosses to a worker the way Dask ships it (pickle): the trained FLANN matcher cannot travel,
+    so the copy re-indexes its references; it must give the very same matches, or logo_match would differ."""
+    import pickle
+
+    from cvpipe import logo
+    from cvpipe.features import detect
+
+    cv2.randu(np.empty(64), 0, 1)  # a worker's OpenCV generator is wherever its earlier tasks left it
+    copy = pickle.loads(pickle.dumps(gallery))
+    assert copy.matcher is not gallery.matcher and copy.dropped == gallery.dropped
+    assert [r.name for r in copy.references] == [r.name for r in gallery.references]
+    scene = detect(_scene(marks["brand1"], _view((420, 300), 0.6, -35, PERSP)), "sift")
+    here, there = logo.match_scene(gallery, scene).to_arrays(), logo.match_scene(copy, scene).to_arrays()
+    assert len(here["scene_idx"]) > 10  # a real match set, not two empty ones
+    assert here.keys() == there.keys() and all(np.array_equal(here[k], there[k]) for k in here)
+
 #: each stage that maps its items with ``st.map`` but ``defect_register`` (tested above), one matrix item where the
 #: stage is a matrix (the code path is the same for every method; the cheapest method keeps the test short)
-FANNED_OUT = ["homography_features", "homography_estimate@ours", "hough_lines@opencv", "logo_verify@orb",
-              "defect_diff", "defect_regions", "stereo_rectify", "stereo_disparity@opencv_sgbm", "panorama_match",
-              "panorama_homographies", "panorama_warp", "panorama_blend"]
+FANNED_OUT = ["homography_features", "homography_estimate@ours", "hough_lines@opencv", "logo_match@orb",
+              "logo_verify@orb", "defect_diff", "defect_regions", "stereo_rectify", "stereo_disparity@opencv_sgbm",
+              "panorama_match", "panorama_homographies", "panorama_warp", "panorama_blend"]
 
 
 def _dvc_stages(stages: dict, params: dict) -> dict[str, dict]:
