@@ -201,3 +201,30 @@ def detect(gray: np.ndarray, detector: str = "sift", max_features: int = 4000,
         size = (size / np.sqrt(sxy.prod())).astype(np.float32)
     angle = np.array([k.angle for k in keypoints], np.float32)[order]
     return Features(xy, size, angle, response[order], np.ascontiguousarray(desc[order]), detector)
+
+
+def detect_item(item: tuple, shared: tuple) -> tuple[dict[str, np.ndarray], float]:
+    """Keypoints and descriptors of one image as the arrays of its ``.npz``: the per-image work of the
+    ``<task>_features`` stages, an item of :func:`cvpipe.compute.map_items` (it may run on another machine: data
+    in, data out).
+
+    Parameters
+    ----------
+    item : tuple
+        ``(gray image, min_long_side)`` (as :func:`detect` takes them).
+    shared : tuple
+        ``(detector, max_features)``.
+
+    Returns
+    -------
+    (dict, float)
+        :meth:`Features.to_arrays` plus ``image_size`` ``(w, h)``, and the seconds the detection took.
+    """
+    import time
+
+    gray, min_long_side = item
+    detector, max_features = shared
+    t0 = time.perf_counter()
+    feats = detect(gray, detector, max_features, min_long_side=min_long_side)
+    seconds = time.perf_counter() - t0
+    return {**feats.to_arrays(), "image_size": gray.shape[::-1]}, seconds

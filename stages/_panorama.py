@@ -6,7 +6,7 @@ earlier keeps its reason and the stage that gave it, so the report can say which
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 from cvpipe.errors import EstimationError
 
@@ -37,3 +37,29 @@ def step_summary(records: Sequence[dict], stage: str, what: str) -> str:
     ok = sum(1 for r in records if r["ok"])
     earlier = sum(1 for r in records if not r["ok"] and r.get("failed_in") != stage)
     return f"{ok} {what}" + (f" ({earlier} failed in an earlier stage)" if earlier else "")
+
+
+def map_sets(st, stage: str, sets: Sequence[tuple[str, dict]], fn: Callable, data: Callable[[str, dict], Any],
+             shared: Any, desc: str) -> Iterator[tuple[str, dict | None, Any]]:
+    """Run ``fn`` on every set that has not failed earlier through ``st.map`` (in process or on a cluster) and
+    yield ``(name, failure record or None, fn's value or None)`` for every set, in order.
+
+    ``sets`` are ``(name, record of the earlier step)``; a record without ``ok`` counts as ok. ``data(name,
+    prev)`` reads a set's item (lazily, here). A set that failed earlier is carried (:func:`step_record`); one
+    whose ``fn`` raised is this stage's failure, already dropped with its reason by ``st.map``.
+    """
+    todo = [(n, prev) for n, prev in sets if prev.get("ok", True)]
+    results = st.map(fn, (data(n, prev) for n, prev in todo), shared=shared, desc=desc, names=[n for n, _ in todo])
+    pending = None
+    for name, prev in sets:
+        if not prev.get("ok", True):
+            yield name, step_record(prev, stage, name, dict, st.drop), None
+            continue
+        if pending is None:
+            pending = next(results, None)
+        if pending is not None and pending[0] == name:
+            yield name, None, pending[1]
+            pending = None
+        else:
+            reason = next(d["reason"] for d in reversed(st.dropped) if d["item"] == name)
+            yield name, {"ok": False, "error": reason, "failed_in": stage}, None

@@ -15,26 +15,20 @@ def defect_diff(st: Stage) -> None:
     ref = io.read_image(inputs.reference, "gray")
     registration = io.load_json(reg_dir / "registration.json")
     fits = {}
-    for name, rec in st.progress(sorted(registration["probes"].items()), "defect diff"):
-        z = io.load_npz(reg_dir / f"{name}.npz")
-        try:
-            with st.timer("difference"):
-                d = defect.difference(ref, z["warped"], z["valid"], p)
-        except EstimationError as exc:
-            st.drop(rec["file"], str(exc))
-            continue
-        arrays, fit = d.to_arrays(), {"file": rec["file"], "primary": d.photometry()}
-        if "alt_H" in z:
-            try:
-                with st.timer("difference"):
-                    alt = defect.difference(ref, z["alt_warped"], z["alt_valid"], p)
-            except EstimationError as exc:  # only a second opinion: the probe goes on without it
-                fit["alternative_error"] = str(exc)
-            else:
-                arrays.update(alt.to_arrays("alt_"))
-                fit["alternative"] = alt.photometry()
-        io.save_npz(out / f"{name}.npz", **arrays)
-        fits[name] = fit
+    probes = sorted(registration["probes"].items())
+    name_of = {rec["file"]: name for name, rec in probes}  # a dropped probe is named by its file
+
+    def probe_data():
+        # read here, lazily: each probe's warped image(s) travel with its task
+        for name, _ in probes:
+            z = io.load_npz(reg_dir / f"{name}.npz")
+            yield z["warped"], z["valid"], (z["alt_warped"], z["alt_valid"]) if "alt_H" in z else None
+
+    for file, (arrays, fit, seconds) in st.map(defect.difference_item, probe_data(), shared=(ref, p),
+                                               desc="defect diff", names=list(name_of)):
+        st.timings["difference"] = st.timings.get("difference", 0.0) + seconds
+        io.save_npz(out / f"{name_of[file]}.npz", **arrays)
+        fits[name_of[file]] = {"file": file, **fit}
     if not fits:
         raise EstimationError("no registered probe could be compared with the reference: "
                               + "; ".join(f"{d['item']}: {d['reason']}" for d in st.dropped))

@@ -9,7 +9,6 @@ a probe dropped by an earlier stage has ``verdict: null`` and its reason in ``er
 from pathlib import Path
 
 from cvpipe import defect, io
-from cvpipe.defect import Difference
 from stages._runner import Stage, run
 
 
@@ -17,19 +16,14 @@ def defect_regions(st: Stage) -> None:
     p, a = st.params, st.args
     registration = io.load_json(a.registration)["probes"]
     differences = io.load_json(Path(a.diff) / "differences.json")
+    names = sorted(differences["probes"])
+    # read here, lazily: each probe's difference maps and registration record travel with its task
+    probe_data = ((io.load_npz(Path(a.diff) / f"{name}.npz"), registration[name]) for name in names)
     results = []
-    for name in st.progress(sorted(differences["probes"]), "defect regions"):
-        reg = registration[name]
-        z = io.load_npz(Path(a.diff) / f"{name}.npz")
-        with st.timer("regions"):
-            first = defect.find_regions(Difference.from_arrays(z), reg["primary"]["H"], reg["probe_shape"], p)
-            alt = (defect.find_regions(Difference.from_arrays(z, "alt_"), reg["alternative"]["H"],
-                                        reg["probe_shape"], p) if "alt_diff" in z else None)
-        chosen = "alternative" if defect.choose(first, alt) is alt else "primary"
-        r = alt if chosen == "alternative" else first
-        results.append({"probe": reg["file"], "verdict": r.verdict, "score": r.score, "regions": r.probe_regions,
-                        "reference_regions": r.regions, "region_scores": r.region_scores, "threshold": r.threshold,
-                        "H": reg[chosen]["H"], "registration": chosen, "method": reg[chosen]["method"]})
+    for _, (record, seconds) in st.map(defect.regions_item, probe_data, shared=p, desc="defect regions",
+                                       names=names):
+        st.timings["regions"] = st.timings.get("regions", 0.0) + seconds
+        results.append(record)
     for d in differences["dropped"]:
         results.append({"probe": d["item"], "verdict": None, "score": None, "regions": [], "H": None,
                         "error": d["reason"]})

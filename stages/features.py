@@ -31,23 +31,28 @@ def features_stage(st: Stage) -> None:
     if not files:
         raise InputError(f"{root}: no images found")
     made: dict[Path, Path] = {}
-    for f in st.progress(files, f"features {detector}"):
-        rel = f.relative_to(root)
-        npz = rel.with_suffix(".npz")
-        if npz in made:  # photo.jpg and photo.png would share photo.npz
-            st.drop(rel.as_posix(), f"same name as {made[npz].as_posix()} (features are stored per name); rename one")
-            continue
-        try:
-            gray = io.read_image(f, "gray")
-        except InputError as exc:
-            st.drop(rel.as_posix(), str(exc))
-            continue
-        is_scene = a.scenes is not None and rel.parts[0] == a.scenes
-        with st.timer("detect"):
-            feats = features.detect(gray, detector, p.max_features,
-                                    min_long_side=getattr(p, "scene_min_long_side", 0) if is_scene else 0)
-        io.save_npz(out / npz, **feats.to_arrays(), image_size=gray.shape[::-1])
-        made[npz] = rel
+    rels = [f.relative_to(root) for f in files]
+
+    def image_data():
+        # read here, lazily: each image travels with its task
+        for f, rel in zip(files, rels):
+            npz = rel.with_suffix(".npz")
+            if npz in made:  # photo.jpg and photo.png would share photo.npz
+                yield InputError(f"same name as {made[npz].as_posix()} (features are stored per name); rename one")
+                continue
+            try:
+                gray = io.read_image(f, "gray")
+            except InputError as exc:
+                yield exc
+                continue
+            made[npz] = rel
+            is_scene = a.scenes is not None and rel.parts[0] == a.scenes
+            yield gray, getattr(p, "scene_min_long_side", 0) if is_scene else 0
+
+    for name, (arrays, seconds) in st.map(features.detect_item, image_data(), shared=(detector, p.max_features),
+                                          desc=f"features {detector}", names=[r.as_posix() for r in rels]):
+        st.timings["detect"] = st.timings.get("detect", 0.0) + seconds
+        io.save_npz(out / Path(name).with_suffix(".npz"), **arrays)
     io.save_json(out / "dropped.json", st.dropped)
     if not made:
         raise InputError(f"{root}: no readable image")

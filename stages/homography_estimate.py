@@ -5,8 +5,8 @@ estimate under ``dropped`` with the reason). Times go to the uncached timings on
 from pathlib import Path
 
 from cvpipe import io
-from cvpipe.errors import EstimationError, InputError
-from cvpipe.homography import METHODS, estimate
+from cvpipe.errors import InputError
+from cvpipe.homography import METHODS, estimate_item
 from stages._runner import Stage, run
 
 
@@ -17,16 +17,15 @@ def homography_estimate(st: Stage) -> None:
     if not files:
         raise InputError(f"{a.matches}: no <pair>.npz matches (run homography_match)")
     out, results = Path(a.out), {}
-    for f in st.progress(files, f"estimate {a.method}"):
-        m = io.load_npz(f)
-        with st.timer("first_call" if not results and not st.dropped else "estimates"):  # numba cache load first
-            try:
-                fit = estimate(a.method, m["src"], m["dst"], **kw)
-            except (EstimationError, InputError) as exc:
-                st.drop(f.stem, f"{len(m['src'])} matches: {exc}")
-                continue
-        io.save_npz(out / f.name, H=fit.H, inliers=fit.inliers)
-        results[f.stem] = {"H": fit.H, "matches": len(m["src"]), "inliers": fit.num_inliers}
+    pairs = (tuple(io.load_npz(f)[k] for k in ("src", "dst")) for f in files)  # read lazily, sent with the task
+    first = True
+    for name, (fit, seconds) in st.map(estimate_item, pairs, shared=(a.method, kw), desc=f"estimate {a.method}",
+                                       names=[f.stem for f in files]):
+        key = "first_call" if first and not st.dropped else "estimates"  # numba cache load first
+        st.timings[key] = st.timings.get(key, 0.0) + seconds
+        first = False
+        io.save_npz(out / f"{name}.npz", H=fit.H, inliers=fit.inliers)
+        results[name] = {"H": fit.H, "matches": len(fit.inliers), "inliers": fit.num_inliers}
     io.save_json(out / "estimates.json", {"method": a.method, "pairs": results, "dropped": st.dropped})
     st.made(f"{len(results)} of {len(files)} pairs estimated -> {out}")
 

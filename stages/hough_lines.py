@@ -1,19 +1,23 @@
 """Stage `hough_lines@{ours,opencv}`: standard Hough lines of every edge map (the median time per image goes to the
 uncached timings)."""
 
+from pathlib import Path
+
 from cvpipe import hough, io
 from stages._runner import Stage, run
 
 
 def hough_lines(st: Stage) -> None:
     p, method = st.params, st.args.method
+    files = io.list_images(st.args.edges)
     images = []
-    for f in st.progress(io.list_images(st.args.edges), f"hough lines {method}"):
-        edges = io.read_image(f, "gray")
-        with st.timer("first_call" if not images else "calls"):  # ours' first: numba compile or cache load
-            lines = hough.detect_lines(edges, p, method)
-        st.timings[f"median.{f.stem}"] = hough.median_seconds(lambda: hough.detect_lines(edges, p, method), p.repeats)
-        images.append({"file": f.name, "lines": lines.tolist()})
+    for name, (lines, first, median) in st.map(hough.lines_item, (io.read_image(f, "gray") for f in files),
+                                               shared=(method, p), desc=f"hough lines {method}",
+                                               names=[f.name for f in files]):
+        key = "first_call" if not images else "calls"  # ours' first: numba compile or cache load
+        st.timings[key] = st.timings.get(key, 0.0) + first
+        st.timings[f"median.{Path(name).stem}"] = median
+        images.append({"file": name, "lines": lines.tolist()})
     rho, theta = hough.hough_steps(p)  # the run's steps in the units of its lines, for hough_report
     io.save_json(st.args.out, {"impl": method, "rho": rho, "theta": theta, "threshold": p.threshold,
                                "refine": p.refine and method == "ours", "images": images})

@@ -60,19 +60,23 @@ def logo_match(st: Stage) -> None:
     if gallery.detector != st.args.detector:
         raise InputError(f"{features}: features of {gallery.detector!r}, expected {st.args.detector!r}")
     reasons, matched = feature_reasons(features), []
-    for sc in st.progress(inputs.scenes, f"match {st.args.detector}"):
-        got = features_of(features, root, sc.path, reasons)
-        if isinstance(got, str):
-            st.drop(sc.path.relative_to(root).as_posix(), got)
-            continue
-        try:
-            with st.timer("match"):
-                m = logo.match_scene(gallery, Features.from_arrays(got), st.params)
-        except (CvpipeError, ValueError) as exc:
-            st.drop(sc.path.relative_to(root).as_posix(), str(exc))
-            continue
-        io.save_npz(out / f"{sc.name}.npz", **m.to_arrays())
-        matched.append(sc.name)
+    names = [sc.path.relative_to(root).as_posix() for sc in inputs.scenes]
+    scene_of = dict(zip(names, inputs.scenes))
+
+    def scene_data():
+        # read here, lazily: each scene's features travel with its task
+        for sc in inputs.scenes:
+            got = features_of(features, root, sc.path, reasons)
+            try:
+                yield InputError(got) if isinstance(got, str) else Features.from_arrays(got)
+            except (CvpipeError, ValueError) as exc:
+                yield InputError(str(exc))
+
+    for name, (m, seconds) in st.map(logo.match_item, scene_data(), shared=(gallery, st.params),
+                                     desc=f"match {st.args.detector}", names=names):
+        st.timings["match"] = st.timings.get("match", 0.0) + seconds
+        io.save_npz(out / f"{scene_of[name].name}.npz", **m.to_arrays())
+        matched.append(scene_of[name].name)
     if not matched:
         raise InputError(f"{root / 'scenes'}: no scene could be matched")
     io.save_json(out / "index.json", {"detector": gallery.detector, "scenes": matched,

@@ -23,29 +23,36 @@ def logo_verify(st: Stage) -> None:
     if index["references"] != [r.name for r in gallery.references]:
         raise InputError(f"{a.matches}: matched against another gallery than {root / 'gallery'}; rerun logo_match")
     scenes = {sc.name: sc for sc in inputs.scenes}
+    rel = {n: scenes[n].path.relative_to(root) for n in index["scenes"] if n in scenes}
+
+    def scene_data():
+        # read here, lazily: each scene's features and matches travel with its task
+        for name in index["scenes"]:
+            if name not in scenes:
+                yield InputError("matched, but no longer in the scenes folder; rerun logo_match")
+                continue
+            try:
+                arrays = io.load_npz(Path(a.features) / rel[name].with_suffix(".npz"))
+                scene, size = Features.from_arrays(arrays), tuple(int(v) for v in arrays["image_size"])
+                yield logo.Matches.from_arrays(io.load_npz(Path(a.matches) / f"{name}.npz")), scene, size
+            except CvpipeError as exc:
+                yield exc
+
+    # a dropped scene is named by its file, as logo_match names it (or by its name when the file is gone)
+    names = [rel[n].as_posix() if n in rel else n for n in index["scenes"]]
+    scene_of = {rel[n].as_posix(): scenes[n] for n in rel}
     records = []
-    for name in st.progress(index["scenes"], f"verify {a.detector}"):
-        sc = scenes.get(name)
-        if sc is None:
-            st.drop(name, "matched, but no longer in the scenes folder; rerun logo_match")
-            continue
-        rel = sc.path.relative_to(root).with_suffix(".npz")
-        try:
-            arrays = io.load_npz(Path(a.features) / rel)
-            scene, size = Features.from_arrays(arrays), tuple(int(v) for v in arrays["image_size"])
-            matches = logo.Matches.from_arrays(io.load_npz(Path(a.matches) / f"{name}.npz"))
-            with st.timer("verify"):
-                det = logo.decide(logo.verify(gallery, matches, scene, size, vp, rng=0), vp)
-        except CvpipeError as exc:
-            st.drop(sc.path.relative_to(root).as_posix(), str(exc))
-            continue
+    for item, (det, scene_xy, seconds) in st.map(logo.verify_scene, scene_data(), shared=(gallery, vp),
+                                                 desc=f"verify {a.detector}", names=names):
+        sc = scene_of[item]
+        st.timings["verify"] = st.timings.get("verify", 0.0) + seconds
         best = det.best
         truth = (sc.brand, sc.quad) if sc.labelled else None
-        records.append(logo.scene_record(name, det, gallery.references[best.reference].name if best else None,
+        records.append(logo.scene_record(sc.name, det, gallery.references[best.reference].name if best else None,
                                           truth))
         if best is not None:
-            io.save_npz(out / f"{name}.npz", pairs=best.pairs, H=best.H, gallery_xy=best.reference_xy,
-                        scene_xy=scene.xy[best.pairs[:, 1]])
+            io.save_npz(out / f"{sc.name}.npz", pairs=best.pairs, H=best.H, gallery_xy=best.reference_xy,
+                        scene_xy=scene_xy)
     if not records:
         raise InputError(f"{root / 'scenes'}: no scene could be verified")
     brands = sorted(inputs.gallery)

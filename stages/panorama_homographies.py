@@ -5,32 +5,37 @@ recorded there with its reason)."""
 from pathlib import Path
 
 from cvpipe import io, panorama
-from cvpipe.errors import EstimationError
+from stages import _panorama as pr
 from stages._runner import Stage, run
 
 
 def panorama_homographies(st: Stage) -> None:
     p, out = st.params, Path(st.args.out)
     seed = st.sections["panorama.match"].seed
-    ok = 0
-    for f in st.progress(sorted(Path(st.args.matches).glob("*.npz")), "panorama homographies"):
-        arrays = io.load_npz(f)
+    ok, files = 0, sorted(Path(st.args.matches).glob("*.npz"))
+    recs = {}  # a set's graph travels with its task; its file names and sizes stay here for its record
+
+    def set_data(name: str, _prev: dict):
+        arrays = io.load_npz(Path(st.args.matches) / f"{name}.npz")
         graph = panorama.MatchGraph.from_arrays(arrays)
-        files = arrays["files"].tolist()
-        rec = {"files": files, "work_sizes": graph.sizes, "full_sizes": arrays["full_sizes"].tolist()}
-        try:
-            with st.timer("register"):
-                reg = panorama.register(graph, refine=p.refine, max_points_per_pair=p.max_points_per_pair, rng=seed,
-                                        ids=files)
-        except EstimationError as exc:  # recorded, so the later stages and the report say which set failed and why
-            rec.update(ok=False, error=str(exc), failed_in="panorama_homographies")
-            st.drop(f.stem, str(exc))
+        recs[name] = {"files": arrays["files"].tolist(), "work_sizes": graph.sizes,
+                      "full_sizes": arrays["full_sizes"].tolist()}
+        return graph, recs[name]["files"]
+
+    for name, failed, got in pr.map_sets(st, "panorama_homographies", [(f.stem, {}) for f in files],
+                                         panorama.register_set, set_data,
+                                         (p.refine, p.max_points_per_pair, seed), "panorama homographies"):
+        rec = recs.pop(name)
+        if failed is not None:  # recorded, so the later stages and the report say which set failed and why
+            rec.update(failed)
         else:
+            reg, seconds = got
+            st.timings["register"] = st.timings.get("register", 0.0) + seconds
             rec.update(reg.to_json(), ok=True)
             for k, why in reg.dropped:
-                st.drop(f"{f.stem}/{files[k]}", why)
+                st.drop(f"{name}/{rec['files'][k]}", why)
             ok += 1
-        io.save_json(out / f"{f.stem}.json", rec)
+        io.save_json(out / f"{name}.json", rec)
     out.mkdir(parents=True, exist_ok=True)
     st.made(f"homographies of {ok} sets in {out}")
 

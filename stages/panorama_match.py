@@ -11,16 +11,19 @@ from stages._runner import Stage, run
 def panorama_match(st: Stage) -> None:
     p, out = st.params, Path(st.args.out)
     sets = sorted(x for x in Path(st.args.features).iterdir() if x.is_dir())
-    for d in st.progress(sets, "panorama match"):
-        arrays = [io.load_npz(f) for f in sorted(d.glob("*.npz"))]
-        feats = [Features.from_arrays(a) for a in arrays]
-        sizes = [tuple(int(v) for v in a["work_size"]) for a in arrays]
-        with st.timer("match"):
-            graph = panorama.match_graph(feats, sizes, ratio=p.ratio, ransac_threshold=p.ransac_threshold,
-                                         min_inliers=p.min_inliers, min_confidence=p.min_confidence,
-                                         candidates=p.candidates, refit_threshold=p.refit_threshold, rng=p.seed)
-        io.save_npz(out / f"{d.name}.npz", **graph.to_arrays(), files=[str(a["image_file"]) for a in arrays],
-                    full_sizes=[a["full_size"] for a in arrays])
+    meta = {}  # a set's features travel with its task; its file names and sizes stay here for its npz
+
+    def set_data():
+        for d in sets:
+            arrays = [io.load_npz(f) for f in sorted(d.glob("*.npz"))]
+            meta[d.name] = ([str(a["image_file"]) for a in arrays], [a["full_size"] for a in arrays])
+            yield [Features.from_arrays(a) for a in arrays], [tuple(int(v) for v in a["work_size"]) for a in arrays]
+
+    for name, (graph, seconds) in st.map(panorama.match_set, set_data(), shared=p, desc="panorama match",
+                                         names=[d.name for d in sets]):
+        st.timings["match"] = st.timings.get("match", 0.0) + seconds
+        files, full_sizes = meta.pop(name)
+        io.save_npz(out / f"{name}.npz", **graph.to_arrays(), files=files, full_sizes=full_sizes)
     out.mkdir(parents=True, exist_ok=True)
     st.made(f"match graphs of {len(sets)} sets in {out}")
 

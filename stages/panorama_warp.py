@@ -3,35 +3,31 @@
 
 from pathlib import Path
 
-import numpy as np
-
 from cvpipe import io, panorama
 from stages import _panorama as pr
 from stages._runner import Stage, run
 
 
-def _warp(st: Stage, h: dict, folder: Path, out: Path) -> dict:
-    """Warp one registered set into ``out``; its ``warp.json`` record."""
-    p = st.params
-    reg = panorama.Registration.from_json(h)
-    images = [io.read_image(folder / name, "color") if k in reg.used else None for k, name in enumerate(h["files"])]
-    with st.timer("warp"):
-        comp = panorama.compose_inputs(images, reg, [tuple(s) for s in h["work_sizes"]], p.compose_megapix)
-        w = panorama.warp_images(comp.images, comp.G, p.projection, comp.focal, comp.ref_size, p.max_canvas_megapix)
-    for k, (img, mask) in enumerate(zip(w.images, w.masks)):
-        io.save_image(out / f"warped_{k}.png", img)
-        io.save_image(out / f"mask_{k}.png", mask)
-    return {"ok": True, "corners": w.corners, "size": w.size, "origin": w.origin, "G": np.array(comp.G),
-            "compose_sizes": comp.sizes, "used": list(reg.used)}
-
-
 def panorama_warp(st: Stage) -> None:
     out, records = Path(st.args.out), []
-    for f in st.progress(sorted(Path(st.args.homographies).glob("*.json")), "panorama warp"):
-        h = io.load_json(f)
-        rec = pr.step_record(h, "panorama_warp", f.stem,
-                             lambda: _warp(st, h, Path(st.args.images) / f.stem, out / f.stem), st.drop)
-        io.save_json(out / f.stem / "warp.json", rec)
+    sets = [(f.stem, io.load_json(f)) for f in sorted(Path(st.args.homographies).glob("*.json"))]
+
+    def set_data(name: str, h: dict):
+        # read here, lazily: the used images travel with the set's task
+        used = set(h["used"])
+        return h, [io.read_image(Path(st.args.images) / name / f, "color") if k in used else None
+                   for k, f in enumerate(h["files"])]
+
+    for name, failed, got in pr.map_sets(st, "panorama_warp", sets, panorama.warp_set, set_data, st.params,
+                                         "panorama warp"):
+        rec = failed
+        if failed is None:
+            w, rec, seconds = got
+            st.timings["warp"] = st.timings.get("warp", 0.0) + seconds
+            for k, (img, mask) in enumerate(zip(w.images, w.masks)):
+                io.save_image(out / name / f"warped_{k}.png", img)
+                io.save_image(out / name / f"mask_{k}.png", mask)
+        io.save_json(out / name / "warp.json", rec)
         records.append(rec)
     out.mkdir(parents=True, exist_ok=True)
     st.made(pr.step_summary(records, "panorama_warp", f"sets warped into {out}"))

@@ -15,10 +15,6 @@ from cvpipe.errors import InputError
 from cvpipe.params import SECTIONS, load_section
 from stages._runner import Stage, run
 
-#: rows of the first pair run once before the timed calls (numba cache load / compilation, allocations)
-WARMUP_ROWS = 16
-
-
 def read_truth(path: Path, shape: tuple[int, ...]) -> np.ndarray:
     """The ``disparity`` array of a pair's truth.npz, checked against the left image's size."""
     arrays = io.load_npz(path)
@@ -37,31 +33,38 @@ def stereo_disparity(st: Stage) -> None:
     rects = io.load_json(rectified / "run.json")["pairs"]
     pairs, _ = datasets.find_stereo(a.pairs)  # what it drops and what could not be rectified, stereo_rectify recorded
     out, results, sources = Path(a.out), {}, {}
-    for pair in st.progress([q for q in pairs if q.name in rects], f"disparity {method}"):
-        rect = rects[pair.name]
-        candidates = (("pair", pair.max_disp), ("rectification", rect.get("max_disp")),
+    todo = [q for q in pairs if q.name in rects]
+    max_disps = {}
+    for pair in todo:
+        candidates = (("pair", pair.max_disp), ("rectification", rects[pair.name].get("max_disp")),
                       ("stereo.disparity", st.params.max_disp))
-        sources[pair.name], max_disp = next((k, v) for k, v in candidates if v is not None)
-        try:
-            left = io.read_image(rectified / pair.name / "left.png")
-            right = io.read_image(rectified / pair.name / "right.png")
-            if not results:
-                with st.timer("warmup"):
-                    stereo.compute_disparity(left[:WARMUP_ROWS], right[:WARMUP_ROWS], max_disp, method, **options)
-            with st.timer(f"disparity {pair.name}"):
-                disp = stereo.compute_disparity(left, right, max_disp, method, **options)
-        except (InputError, ValueError) as exc:
-            st.drop(pair.name, str(exc))
-            continue
-        truth = read_truth(pair.truth, disp.shape) if pair.truth is not None and rect["kind"] == "none" else None
-        with io.atomic_path(out / pair.name / "disparity.npy") as tmp:
+        sources[pair.name], max_disps[pair.name] = next((k, v) for k, v in candidates if v is not None)
+
+    def pair_data():
+        # read here, lazily: each rectified pair travels with its task
+        for pair in todo:
+            try:
+                yield (io.read_image(rectified / pair.name / "left.png"),
+                       io.read_image(rectified / pair.name / "right.png"), max_disps[pair.name])
+            except InputError as exc:
+                yield exc
+
+    by_name = {q.name: q for q in todo}
+    for name, (disp, seconds) in st.map(stereo.disparity_item, pair_data(), shared=(method, options),
+                                        desc=f"disparity {method}", names=list(by_name)):
+        pair = by_name[name]
+        st.timings["warmup"] = st.timings.get("warmup", 0.0) + seconds.get("warmup", 0.0)
+        st.timings[f"disparity {name}"] = seconds["disparity"]
+        truth = read_truth(pair.truth, disp.shape) if pair.truth is not None and rects[name]["kind"] == "none" \
+            else None
+        with io.atomic_path(out / name / "disparity.npy") as tmp:
             with open(tmp, "wb") as fh:
                 np.save(fh, disp.astype(np.float32), allow_pickle=False)
         try:
-            io.save_image(out / pair.name / "disparity.png", stereo.to_png16(disp))
+            io.save_image(out / name / "disparity.png", stereo.to_png16(disp))
         except ValueError as exc:  # disparities of 256 px or more: the npy has them
-            st.drop(f"{pair.name}/disparity.png", str(exc))
-        results[pair.name] = {**stereo.pair_result(disp, max_disp, truth), "truth": truth is not None}
+            st.drop(f"{name}/disparity.png", str(exc))
+        results[name] = {**stereo.pair_result(disp, max_disps[name], truth), "truth": truth is not None}
     result = {"method": method, "pairs": results, "dropped": st.dropped, "max_disp_from": sources}
     io.save_json(out / "run.json", result)
     io.save_json(a.metrics, stereo.metrics_of(result))

@@ -8,7 +8,7 @@ why) and the metrics file. The rule (calibrated / no-op / uncalibrated): :func:`
 from pathlib import Path
 
 from cvpipe import datasets, io, stereo
-from cvpipe.errors import EstimationError, InputError
+from cvpipe.errors import InputError
 from stages._runner import Stage, run
 
 
@@ -18,28 +18,25 @@ def stereo_rectify(st: Stage) -> None:
     for d in dropped:
         st.drop(d["item"], d["reason"])
     out, records = Path(a.out), {}
-    for pair in st.progress(pairs, "rectify"):
-        try:
-            left, right = io.read_image(pair.left), io.read_image(pair.right)
-            calib = None
-            if pair.calib is not None:
-                calib = stereo.parse_calibration(pair.calib.read_text(encoding="utf-8"), str(pair.calib))
-            with st.timer(f"rectify {pair.name}"):
-                p1, p2 = stereo.feature_matches(left, right, p.detector, p.max_features, p.ratio, p.seed)
-                got = stereo.rectify_pair(left, right, p1, p2, calib, threshold=p.threshold,
-                                                   margin=p.margin, seed=p.seed, rectified_max_dy=p.rectified_max_dy,
-                                                   rectified_share=p.rectified_share)
-        except EstimationError as exc:
-            st.drop(pair.name, f"cannot be rectified: {exc}")
-            continue
-        except (InputError, ValueError, UnicodeDecodeError) as exc:
-            st.drop(pair.name, str(exc))
-            continue
-        io.save_image(out / pair.name / "left.png", got.left)
-        io.save_image(out / pair.name / "right.png", got.right)
-        io.save_npz(out / pair.name / "matches.npz", left=got.points_left, right=got.points_right)
-        io.save_json(out / pair.name / "rect.json", got.record)
-        records[pair.name] = got.record
+
+    def pair_data():
+        # read here, lazily: each pair's images and calibration text travel with its task
+        for pair in pairs:
+            try:
+                left, right = io.read_image(pair.left), io.read_image(pair.right)
+                calib = None if pair.calib is None else pair.calib.read_text(encoding="utf-8")
+                yield left, right, calib, None if pair.calib is None else str(pair.calib)
+            except (InputError, UnicodeDecodeError) as exc:
+                yield exc if isinstance(exc, InputError) else InputError(str(exc))
+
+    for name, (got, seconds) in st.map(stereo.rectify_item, pair_data(), shared=p, desc="rectify",
+                                       names=[q.name for q in pairs]):
+        st.timings[f"rectify {name}"] = seconds
+        io.save_image(out / name / "left.png", got.left)
+        io.save_image(out / name / "right.png", got.right)
+        io.save_npz(out / name / "matches.npz", left=got.points_left, right=got.points_right)
+        io.save_json(out / name / "rect.json", got.record)
+        records[name] = got.record
     io.save_json(out / "run.json", {"pairs": records, "dropped": st.dropped})
     io.save_json(a.metrics, stereo.rectify_metrics(records))
     if not records:

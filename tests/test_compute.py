@@ -21,7 +21,7 @@ from cvpipe.errors import EstimationError, InputError
 from cvpipe.params import ComputeParams, from_mapping
 
 from test_defects import board, make_probe, motion
-from test_logos import PERSP, _scene, _view, gallery_dir, marks  # noqa: F401 - fixtures used below
+from test_logos import PERSP, _scene, _view, gallery, gallery_dir, marks  # noqa: F401 - fixtures used below
 
 pytestmark = pytest.mark.timeout(600)  # a cluster run that stalls fails here, not after the suite-wide 1500 s
 
@@ -453,3 +453,121 @@ def test_stage_map_without_compute_section_runs_in_process(tmp_path, repo_root):
     st = Stage("t", argparse.Namespace(params=str(tmp_path / "params.yaml")))
     assert list(st.map(half_of_even, [4, 5], names=["x", "y"])) == [("x", 2)]
     assert st.dropped == [{"item": "y", "reason": "5 is odd"}]
+
+
+# ------------------------------------------------------------------- every stage that fans out, byte for byte
+
+
+def test_gallery_travels_to_a_worker_and_matches_the_same(gallery, marks):
+    """A logo gallery crosses to a worker the way Dask ships it (pickle): the trained FLANN matcher cannot travel,
+    so the copy re-indexes its references; it must give the very same matches, or logo_match would differ."""
+    import pickle
+
+    from cvpipe import logo
+    from cvpipe.features import detect
+
+    cv2.randu(np.empty(64), 0, 1)  # a worker's OpenCV generator is wherever its earlier tasks left it
+    copy = pickle.loads(pickle.dumps(gallery))
+    assert copy.matcher is not gallery.matcher and copy.dropped == gallery.dropped
+    assert [r.name for r in copy.references] == [r.name for r in gallery.references]
+    scene = detect(_scene(marks["brand1"], _view((420, 300), 0.6, -35, PERSP)), "sift")
+    here, there = logo.match_scene(gallery, scene).to_arrays(), logo.match_scene(copy, scene).to_arrays()
+    assert len(here["scene_idx"]) > 10  # a real match set, not two empty ones
+    assert here.keys() == there.keys() and all(np.array_equal(here[k], there[k]) for k in here)
+
+#: each stage that maps its items with ``st.map`` but ``defect_register`` (tested above), one matrix item where the
+#: stage is a matrix (the code path is the same for every method; the cheapest method keeps the test short)
+FANNED_OUT = ["homography_features", "homography_estimate@ours", "hough_lines@opencv", "logo_match@orb",
+              "logo_verify@orb", "defect_diff", "defect_regions", "stereo_rectify", "stereo_disparity@opencv_sgbm",
+              "panorama_match", "panorama_homographies", "panorama_warp", "panorama_blend"]
+
+
+def _dvc_stages(stages: dict, params: dict) -> dict[str, dict]:
+    """Every dvc.yaml stage (one per matrix item, ``base@value``) with its ``argv``, ``outs`` (outs and metrics)
+    and ``deps``, the ``${...}`` templates filled from ``params``."""
+    import re
+    import shlex
+
+    def fill(text: str, item: dict) -> str:
+        def one(m: re.Match) -> str:
+            key = m.group(1)
+            if key.startswith("item."):
+                return item[key[5:]]
+            node = params
+            for part in key.split("."):
+                node = node[part]
+            return str(node)
+
+        return re.sub(r"\$\{([^}]+)\}", one, text)
+
+    def paths(entries: list, item: dict) -> list[str]:
+        return [fill(e if isinstance(e, str) else next(iter(e)), item) for e in entries]
+
+    out = {}
+    for base, spec in stages.items():
+        matrix = spec.get("matrix", {})
+        key = next(iter(matrix), None)
+        for value in matrix.get(key, [None]):
+            item = {} if key is None else {key: value}
+            out[base if key is None else f"{base}@{value}"] = {
+                "argv": shlex.split(fill(spec["cmd"], item)), "deps": paths(spec.get("deps", []), item),
+                "outs": paths(spec.get("outs", []) + spec.get("metrics", []), item)}
+    return out
+
+
+@pytest.fixture(scope="module")
+def sample_pipeline(tmp_path_factory, repo_root):
+    """A scratch copy of the pipeline's layout on the samples (fewer logo scenes), with ``run(stage, scheduler)``
+    that runs one dvc.yaml stage there (the stages whose outputs it depends on first, once, in process) and returns
+    its output files' bytes."""
+    import shutil
+
+    import yaml
+
+    root = tmp_path_factory.mktemp("pipeline")
+    params = yaml.safe_load((repo_root / "params.yaml").read_text())
+    params.pop("compute", None)  # in process unless CVPIPE_COMPUTE_SCHEDULER says otherwise
+    params["samples"].update(logo_scenes=3, logo_negatives=1)  # the few scenes the test needs
+    (root / "params.yaml").write_text(yaml.safe_dump(params))
+    stages = _dvc_stages(yaml.safe_load((repo_root / "dvc.yaml").read_text())["stages"], params)
+    done: set[str] = set()
+
+    def call(name: str, scheduler: str) -> dict[str, bytes]:
+        for out in stages[name]["outs"]:  # nothing left from another run can stand in for a missing output
+            p = root / out
+            shutil.rmtree(p) if p.is_dir() else p.unlink(missing_ok=True)
+        env = dict(os.environ, PYTHONPATH=str(repo_root), CVPIPE_COMPUTE_SCHEDULER=scheduler)
+        argv = stages[name]["argv"]
+        proc = subprocess.run([sys.executable, *argv[1:]] if argv[0] == "python" else argv, cwd=root, env=env,
+                              capture_output=True, text=True)
+        assert proc.returncode == 0, f"{name} ({scheduler or 'in process'}): {proc.stderr}"
+        files = {}
+        for out in stages[name]["outs"]:
+            p = root / out
+            for f in sorted(p.rglob("*")) if p.is_dir() else [p]:
+                if f.is_file():
+                    files[f.relative_to(root).as_posix()] = f.read_bytes()
+        return files
+
+    def run(name: str, scheduler: str = "") -> dict[str, bytes]:
+        for pre, spec in stages.items():
+            if pre not in done and pre != name and any(
+                    d == o or d.startswith(o + "/") for d in stages[name]["deps"] for o in spec["outs"]):
+                run(pre)
+        done.add(name)
+        return call(name, scheduler)
+
+    return run
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("stage", FANNED_OUT)
+def test_fanned_out_stage_identical_serial_and_local(sample_pipeline, stage):
+    """Every stage that fans its items out writes the same bytes in process and on a LocalCluster (through
+    ``CVPIPE_COMPUTE_SCHEDULER``, as a user would run ``dvc repro`` on a cluster)."""
+    serial = sample_pipeline(stage)
+    local = sample_pipeline(stage, "local")
+    assert serial, f"{stage} wrote nothing"
+    assert sorted(local) == sorted(serial)
+    for path in serial:
+        assert local[path] == serial[path], path  # byte for byte

@@ -27,16 +27,16 @@ from ..errors import EstimationError
 from ..features import Features
 from ..params import DefectDiffParams, DefectRegionParams, InspectParams, load_inspect_params
 from ._util import check_gray
-from .diff import Difference, difference, fit_gain_bias
-from .regions import VERDICTS, Inspection, choose, find_regions, map_boxes, merge_boxes
+from .diff import Difference, difference, difference_item, fit_gain_bias
+from .regions import VERDICTS, Inspection, choose, find_regions, map_boxes, merge_boxes, regions_item
 from .register import (ProbeRegistration, register_direct, register_item, register_probe, wants_alternative,
                        warp_probe, warp_to_reference)
 from .report import draw_regions, evaluate, heat_map
 
 __all__ = ["VERDICTS", "Difference", "InspectParams", "Inspection", "ProbeRegistration", "choose", "compare",
-           "difference", "draw_regions", "evaluate", "find_regions", "fit_gain_bias", "heat_map", "inspect",
-           "load_inspect_params", "map_boxes", "merge_boxes", "register_direct", "register_item", "register_probe",
-           "wants_alternative", "warp_probe", "warp_to_reference"]
+           "difference", "difference_item", "draw_regions", "evaluate", "find_regions", "fit_gain_bias", "heat_map",
+           "inspect", "load_inspect_params", "map_boxes", "merge_boxes", "register_direct", "register_item",
+           "register_probe", "regions_item", "wants_alternative", "warp_probe", "warp_to_reference"]
 
 
 def compare(reference: np.ndarray, warped: np.ndarray, valid: np.ndarray, registration: ProbeRegistration,

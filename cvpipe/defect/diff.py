@@ -163,3 +163,45 @@ def difference(reference: np.ndarray, warped: np.ndarray, valid: np.ndarray,
     d[~valid] = 0.0
     lo, hi = np.percentile(ref[valid][::7], [1, 99])
     return Difference(d.astype(np.float32), valid, gain, bias, sigma / gain, float(hi - lo))
+
+
+def difference_item(item: tuple, shared: tuple) -> tuple[dict, dict, float]:
+    """The difference map(s) of one registered probe: the per-probe work of the ``defect_diff`` stage, an item of
+    :func:`cvpipe.compute.map_items` (it may run on another machine: data in, data out).
+
+    Parameters
+    ----------
+    item : tuple
+        ``(warped, valid, alternative)``: the probe warped onto the reference and its valid mask, and the same
+        pair for the direct alternative registration, or None.
+    shared : tuple
+        ``(reference gray image, DefectDiffParams)``, sent once per worker.
+
+    Returns
+    -------
+    (arrays, fit, seconds)
+        The arrays of the ``<probe>.npz`` (:meth:`Difference.to_arrays`, ``alt_``-prefixed for the alternative),
+        the photometric fit record (``primary`` and ``alternative``, or ``alternative_error`` when only the
+        alternative could not be compared) and the seconds the differences took.
+
+    Raises
+    ------
+    EstimationError, InputError
+        As :func:`difference`, for the primary registration (the stage drops the probe with the reason).
+    """
+    import time
+
+    warped, valid, alternative = item
+    reference, p = shared
+    t0 = time.perf_counter()
+    d = difference(reference, warped, valid, p)
+    arrays, fit = d.to_arrays(), {"primary": d.photometry()}
+    if alternative is not None:
+        try:
+            alt = difference(reference, *alternative, p)
+        except EstimationError as exc:  # only a second opinion: the probe goes on without it
+            fit["alternative_error"] = str(exc)
+        else:
+            arrays.update(alt.to_arrays("alt_"))
+            fit["alternative"] = alt.photometry()
+    return arrays, fit, time.perf_counter() - t0

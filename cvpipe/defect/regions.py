@@ -200,3 +200,35 @@ def choose(first: Inspection, alternative: Inspection | None) -> Inspection:
     if alternative is not None and first.verdict == "faulty" and alternative.score < first.score:
         return alternative
     return first
+
+
+def regions_item(item: tuple, p: DefectRegionParams) -> tuple[dict, float]:
+    """Regions and verdict of one probe from its difference maps: the per-probe work of the ``defect_regions``
+    stage, an item of :func:`cvpipe.compute.map_items` (it may run on another machine: data in, data out).
+
+    Parameters
+    ----------
+    item : tuple
+        ``(arrays, registration)``: the probe's ``defect_diff`` arrays (``alt_``-prefixed ones for the direct
+        alternative, when there is one) and its ``registration.json`` record (``file``, ``probe_shape``,
+        ``primary`` and ``alternative`` with their ``H`` and ``method``).
+    p : DefectRegionParams
+
+    Returns
+    -------
+    (dict, float)
+        The probe's ``results.json`` record, for the registration :func:`choose` keeps, and the seconds it took.
+    """
+    import time
+
+    arrays, reg = item
+    t0 = time.perf_counter()
+    first = find_regions(Difference.from_arrays(arrays), reg["primary"]["H"], reg["probe_shape"], p)
+    alt = (find_regions(Difference.from_arrays(arrays, "alt_"), reg["alternative"]["H"], reg["probe_shape"], p)
+           if "alt_diff" in arrays else None)
+    seconds = time.perf_counter() - t0
+    chosen = "alternative" if choose(first, alt) is alt else "primary"
+    r = alt if chosen == "alternative" else first
+    return {"probe": reg["file"], "verdict": r.verdict, "score": r.score, "regions": r.probe_regions,
+            "reference_regions": r.regions, "region_scores": r.region_scores, "threshold": r.threshold,
+            "H": reg[chosen]["H"], "registration": chosen, "method": reg[chosen]["method"]}, seconds

@@ -38,6 +38,7 @@ from .estimate import (
     chance_probability,
     check_significant,
     estimate,
+    estimate_item,
     find_homography,
     log10_nfa,
     points_area,
@@ -56,7 +57,7 @@ from .report import (
 
 __all__ = [
     "DEFAULT_MAX_ITERS", "MAX_NFA", "METHODS", "HomographyFit", "alignment_checkerboard", "alignment_panel",
-    "chance_probability", "check_significant", "compare_methods", "correspondences", "dlt", "estimate",
+    "chance_probability", "check_significant", "compare_methods", "correspondences", "dlt", "estimate", "estimate_item",
     "find_homography", "hartley_normalization", "log10_nfa", "metric_key", "metrics_of", "picture_panels",
     "points_area", "quality_plots", "report_summary", "transform_points",
 ]

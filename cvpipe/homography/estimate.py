@@ -422,3 +422,36 @@ def estimate(method: str, src, dst, **kwargs) -> HomographyFit:
         raise EstimationError(f"only {n} matches: a homography fits any 4 exactly, so this one cannot be told "
                               "from chance; supply more matches (more features, a larger ratio)")
     return fit
+
+
+def estimate_item(item: tuple, shared: tuple) -> tuple[HomographyFit, float]:
+    """One pair's homography: the per-pair work of the ``homography_estimate`` stage, an item of
+    :func:`cvpipe.compute.map_items` (it may run on another machine: data in, data out).
+
+    Parameters
+    ----------
+    item : tuple
+        ``(src, dst)``: the pair's (N, 2) matched points.
+    shared : tuple
+        ``(method, kwargs)``: a key of :data:`METHODS` and the keyword arguments of :func:`estimate`.
+
+    Returns
+    -------
+    (HomographyFit, float)
+        The fit and the seconds it took.
+
+    Raises
+    ------
+    EstimationError, InputError
+        As :func:`estimate`, the message prefixed with the number of matches (``"12 matches: ..."``).
+    """
+    import time
+
+    src, dst = item
+    method, kwargs = shared
+    t0 = time.perf_counter()
+    try:
+        fit = estimate(method, src, dst, **kwargs)
+    except (EstimationError, InputError) as exc:
+        raise type(exc)(f"{len(src)} matches: {exc}") from None
+    return fit, time.perf_counter() - t0

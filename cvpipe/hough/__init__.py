@@ -12,8 +12,8 @@
 """
 
 from .edges import canny_edges
-from .evaluate import (cell_agreement, compare_runs, line_cells, line_segment_matches, median_seconds, metrics_of,
-                       segment_segment_matches, truth_matches)
+from .evaluate import (cell_agreement, compare_runs, line_cells, line_segment_matches, lines_item, median_seconds,
+                       metrics_of, segment_segment_matches, truth_matches)
 from .probabilistic import hough_lines_probabilistic
 from .report import draw_lines, draw_segments, quality_plot, report_summary
 from .transform import (IMPLEMENTATIONS, HoughGrid, detect_lines, get_impl, hough_accumulator, hough_grid,
@@ -39,6 +39,7 @@ __all__ = [
     "compare_runs",
     "metrics_of",
     "median_seconds",
+    "lines_item",
     "draw_lines",
     "draw_segments",
     "report_summary",

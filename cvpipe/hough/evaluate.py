@@ -285,3 +285,30 @@ def metrics_of(compared: dict) -> dict:
     per_image = {r["file"]: {k: (int(v) if isinstance(v, bool) else v) for k, v in r.items() if k != "file"}
                  for r in compared["per_image"]}
     return {"hough": {"all": summary, **per_image}}
+
+
+def lines_item(edges: np.ndarray, shared: tuple) -> tuple[np.ndarray, float, float]:
+    """The lines of one edge map and their times: the per-image work of the ``hough_lines`` stage, an item of
+    :func:`cvpipe.compute.map_items` (it may run on another machine: data in, data out).
+
+    Parameters
+    ----------
+    edges : (H, W) uint8
+        The edge map.
+    shared : tuple
+        ``(method, HoughLinesParams)``: a key of :data:`cvpipe.hough.IMPLEMENTATIONS` and the ``hough.lines``
+        section (``rho``, ``theta_deg``, ``threshold``, ``refine`` for ours, ``repeats``).
+
+    Returns
+    -------
+    (lines, first, median)
+        The (N, 3) ``[rho, theta, votes]`` rows, the seconds of the first call (numba cache load included on a
+        fresh worker) and the median seconds over ``repeats`` further calls (:func:`median_seconds`).
+    """
+    from .transform import detect_lines
+
+    method, p = shared
+    t0 = time.perf_counter()
+    lines = detect_lines(edges, p, method)
+    first = time.perf_counter() - t0
+    return lines, first, median_seconds(lambda: detect_lines(edges, p, method), p.repeats)

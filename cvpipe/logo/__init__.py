@@ -27,9 +27,9 @@ The package takes arrays only; reading the gallery folder lives in the command, 
 recipe: :func:`recognize`, :func:`every_logo`) and ``report`` (evaluation, stage records, pictures).
 """
 
-from .detect import DEFAULT_EXTRA_SCORE, MAX_OVERLAP, Detection, decide, every_logo, quad_iou, recognize
+from .detect import DEFAULT_EXTRA_SCORE, MAX_OVERLAP, Detection, decide, every_logo, quad_iou, recognize, verify_scene
 from .gallery import Gallery, Reference, build_gallery
-from .match import Matches, match_scene
+from .match import Matches, match_item, match_scene
 from .report import (NO_TRUTH, confusion, draw_confusion, draw_detection, evaluate, evaluate_records, found_counts,
                      found_plot, merge_dropped, metric_key, metrics_of, pick_method, pr_rows, quad_error,
                      report_summary, scene_record)
@@ -40,8 +40,9 @@ __all__ = [
     "DEFAULT_EXTRA_SCORE", "MAX_OVERLAP", "MODELS", "NO_TRUTH", "Detection", "Gallery", "Hypothesis", "Matches",
     "Reference",
     "affine_ransac", "build_gallery", "confusion", "decide", "draw_confusion", "draw_detection", "evaluate",
-    "evaluate_records", "every_logo", "fit_affine", "found_counts", "found_plot", "map_poses", "match_scene",
+    "evaluate_records", "every_logo", "fit_affine", "found_counts", "found_plot", "map_poses", "match_item",
+    "match_scene",
     "merge_dropped", "metric_key", "metrics_of", "pick_method", "pose_agrees", "pose_probability", "pr_rows",
     "quad_error", "quad_iou", "recognize", "report_summary",
-    "scene_record", "shape_problem", "significance", "verify",
+    "scene_record", "shape_problem", "significance", "verify", "verify_scene",
 ]

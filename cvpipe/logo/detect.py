@@ -166,3 +166,30 @@ def every_logo(det: Detection, score_threshold: float, max_overlap: float = MAX_
         if all(quad_iou(h.quad, k.quad) <= max_overlap for k in kept):
             kept.append(h)
     return kept
+
+
+def verify_scene(item: tuple, shared: tuple) -> tuple[Detection, np.ndarray | None, float]:
+    """Verify and decide one scene from its cached matches: the per-scene work of the ``logo_verify`` stage, an
+    item of :func:`cvpipe.compute.map_items` (it may run on another machine: data in, data out).
+
+    Parameters
+    ----------
+    item : tuple
+        ``(Matches, scene Features, (width, height))``.
+    shared : tuple
+        ``(Gallery, LogoVerifyParams)``, sent once per worker.
+
+    Returns
+    -------
+    (Detection, ndarray or None, float)
+        The decision (RANSAC seeded with 0), the scene points of its best hypothesis' pairs ((K, 2), None when no
+        hypothesis is plausible) and the seconds the verification took.
+    """
+    import time
+
+    matches, scene, size = item
+    gallery, p = shared
+    t0 = time.perf_counter()
+    det = decide(verify(gallery, matches, scene, size, p, rng=0), p)
+    seconds = time.perf_counter() - t0
+    return det, None if det.best is None else scene.xy[det.best.pairs[:, 1]], seconds

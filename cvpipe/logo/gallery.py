@@ -90,6 +90,18 @@ class Gallery:
     def binary(self) -> bool:
         return DETECTORS[self.detector][1]
 
+    def __reduce__(self):
+        # the trained OpenCV matcher cannot be pickled: a copy (a Dask worker's) re-indexes the usable references,
+        # which is deterministic (build_gallery seeds FLANN), so it answers exactly as this one
+        return _rebuild, (self.references, self.dropped)
+
+
+def _rebuild(references: tuple, dropped: tuple) -> "Gallery":
+    """The gallery of :meth:`Gallery.__reduce__`: the usable references indexed again, the dropped names kept."""
+    from dataclasses import replace
+
+    return replace(build_gallery(references, 4), dropped=dropped)
+
 
 def _prepare(desc: np.ndarray, binary: bool) -> np.ndarray:
     """RootSIFT for float descriptors (L1 normalise, square root): Hellinger instead of Euclidean distance, which

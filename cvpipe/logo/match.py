@@ -106,3 +106,39 @@ def match_scene(gallery: Gallery, scene: Features, params: LogoMatchParams | Non
     first = np.ones(len(m_ref), bool)
     first[1:] = (m_ref[1:] != m_ref[:-1]) | (m_gal[1:] != m_gal[:-1])
     return Matches(m_ref[first], m_gal[first], rows[first].astype(np.int64), m_dist[first].astype(np.float32))
+
+
+def match_item(scene: Features, shared: tuple) -> tuple[Matches, float]:
+    """Tentative matches of one scene: the per-scene work of the ``logo_match`` stage, an item of
+    :func:`cvpipe.compute.map_items` (it may run on another machine: data in, data out).
+
+    Parameters
+    ----------
+    scene : Features
+        The scene's features.
+    shared : tuple
+        ``(Gallery, LogoMatchParams)``, sent once per worker (the gallery is indexed again there).
+
+    Returns
+    -------
+    (Matches, float)
+        :func:`match_scene`'s matches and the seconds they took.
+
+    Raises
+    ------
+    InputError
+        Features of another detector than the gallery's (the stage drops the scene with the reason).
+    """
+    import time
+
+    from ..errors import InputError
+
+    gallery, p = shared
+    t0 = time.perf_counter()
+    try:
+        m = match_scene(gallery, scene, p)
+    except InputError:
+        raise
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    return m, time.perf_counter() - t0

@@ -26,25 +26,26 @@ from ..errors import EstimationError, InputError
 from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
                       PanoramaWarpParams)
 from .blend import (BLENDERS, DEFAULT_GAIN, DEFAULT_GAIN_BLOCK, GAIN_CHOICES, apply_gains, blend_feather,
-                    blend_multiband, compensation_gains, compose, gain_compensation, overlap_difference)
+                    blend_multiband, blend_set, compensation_gains, compose, gain_compensation, overlap_difference)
 from .crop import largest_rectangle
 from .features import (detect_all, normalize_det, rescale_homographies, resize, resize_matrix, resized_size,
                        scale_for, working_images)
-from .match import Edge, MatchGraph, candidate_pairs, match_graph, prefilter_counts, refit
+from .match import Edge, MatchGraph, candidate_pairs, match_graph, match_set, prefilter_counts, refit
 from .opencv_baseline import OPENCV_STATUS, opencv_stitch
 from .refine import levenberg_marquardt, nearest_rotation, refine_homographies, refine_rotations
-from .register import REFINEMENTS, Registration, estimate_focal, maximum_spanning_tree, register
+from .register import REFINEMENTS, Registration, estimate_focal, maximum_spanning_tree, register, register_set
 from .seams import seam_labels, seam_lines
-from .warp import PROJECTIONS, ComposeInputs, Warped, compose_inputs, warp_images
+from .warp import PROJECTIONS, ComposeInputs, Warped, compose_inputs, warp_images, warp_set
 
 __all__ = ["BLENDERS", "DEFAULT_GAIN", "DEFAULT_GAIN_BLOCK", "GAIN_CHOICES", "apply_gains", "compensation_gains",
            "OPENCV_STATUS", "PROJECTIONS", "REFINEMENTS", "ComposeInputs", "Edge", "MatchGraph",
-           "Panorama", "Registration", "Warped", "blend_feather", "blend_multiband", "candidate_pairs", "compose",
-           "compose_inputs", "detect_all", "estimate_focal", "gain_compensation", "largest_rectangle",
-           "levenberg_marquardt", "match_graph", "maximum_spanning_tree", "nearest_rotation", "normalize_det",
-           "opencv_stitch", "overlap_difference", "prefilter_counts", "refine_homographies", "refine_rotations",
-           "refit", "register", "rescale_homographies", "resize", "resize_matrix", "resized_size", "scale_for",
-           "seam_labels", "seam_lines", "stitch", "warp_images", "working_images"]
+           "Panorama", "Registration", "Warped", "blend_feather", "blend_multiband", "blend_set", "candidate_pairs",
+           "compose", "compose_inputs", "detect_all", "estimate_focal", "gain_compensation", "largest_rectangle",
+           "levenberg_marquardt", "match_graph", "match_set", "maximum_spanning_tree", "nearest_rotation",
+           "normalize_det", "opencv_stitch", "overlap_difference", "prefilter_counts", "refine_homographies",
+           "refine_rotations", "refit", "register", "register_set", "rescale_homographies", "resize", "resize_matrix",
+           "resized_size", "scale_for", "seam_labels", "seam_lines", "stitch", "warp_images", "warp_set",
+           "working_images"]
 
 
 @dataclass(frozen=True)

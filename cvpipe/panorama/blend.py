@@ -404,3 +404,34 @@ def compose(w: Warped, blender: str, bands: int, gain: str = DEFAULT_GAIN, gain_
     labels = seam_labels(w)
     pano = BLENDERS[blender](w, labels, bands, gains)
     return pano, labels >= 0, seam_lines(labels)
+
+
+def blend_set(w: Warped, p) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict, float]:
+    """Compensate, seam and blend one warped set: the per-set work of the ``panorama_blend`` stage, an item of
+    :func:`cvpipe.compute.map_items` (it may run on another machine: data in, data out).
+
+    Parameters
+    ----------
+    w : Warped
+        The set's warped images and masks.
+    p : PanoramaBlendParams
+        ``blender``, ``bands``, ``gain_compensation``, ``gain_block``.
+
+    Returns
+    -------
+    (pano, mask, seams, record, seconds)
+        The (H, W, 3) uint8 panorama, its (H, W) bool mask and seams, the JSON record (``ok``, ``gains``: one per
+        image, per image and channel, or each image's mean gain per channel in the block modes; ``ghosting`` with
+        and without the gains) and the seconds the blending took.
+    """
+    import time
+
+    t0 = time.perf_counter()
+    pano, mask, seams = compose(w, p.blender, p.bands, p.gain_compensation, p.gain_block)
+    seconds = time.perf_counter() - t0
+    gains = compensation_gains(w, p.gain_compensation, p.gain_block)
+    gains = np.ones(len(w.images)) if gains is None else gains
+    shown = gains if isinstance(gains, np.ndarray) else np.stack([g.reshape(-1, g.shape[2]).mean(0) for g in gains])
+    record = {"ok": True, "gains": shown, "ghosting": overlap_difference(w, gains),
+              "ghosting_without_gains": overlap_difference(w)}
+    return pano, mask, seams, record, seconds

@@ -324,3 +324,30 @@ def _components(n: int, edges) -> list[list[int]]:
     for a in range(n):
         groups.setdefault(find(a), []).append(a)
     return list(groups.values())
+
+
+def match_set(item: tuple, p) -> tuple[MatchGraph, float]:
+    """The match graph of one set: the per-set work of the ``panorama_match`` stage, an item of
+    :func:`cvpipe.compute.map_items` (it may run on another machine: data in, data out).
+
+    Parameters
+    ----------
+    item : tuple
+        ``(features, work sizes)``: each image's :class:`~cvpipe.features.Features` and ``(w, h)``.
+    p : PanoramaMatchParams
+        ``ratio``, ``ransac_threshold``, ``min_inliers``, ``min_confidence``, ``candidates``, ``refit_threshold``,
+        ``seed``.
+
+    Returns
+    -------
+    (MatchGraph, float)
+        The graph (:func:`match_graph`) and the seconds it took.
+    """
+    import time
+
+    feats, sizes = item
+    t0 = time.perf_counter()
+    graph = match_graph(feats, sizes, ratio=p.ratio, ransac_threshold=p.ransac_threshold, min_inliers=p.min_inliers,
+                        min_confidence=p.min_confidence, candidates=p.candidates, refit_threshold=p.refit_threshold,
+                        rng=p.seed)
+    return graph, time.perf_counter() - t0

@@ -274,3 +274,33 @@ def register(graph: MatchGraph, *, refine: str, max_points_per_pair: int, rng=No
             if refine == "rotation" or rms_rot <= ROTATION_RMS_FACTOR * rms1 + ROTATION_RMS_SLACK:
                 G, focal, rms1, model = G_rot, f_rot, rms_rot, "rotation"
     return Registration(tuple(sorted(main)), dropped, ref, G, tuple(tree), float(focal), rms0, rms1, model)
+
+
+def register_set(item: tuple, shared: tuple) -> tuple[Registration, float]:
+    """Register one set from its match graph: the per-set work of the ``panorama_homographies`` stage, an item of
+    :func:`cvpipe.compute.map_items` (it may run on another machine: data in, data out).
+
+    Parameters
+    ----------
+    item : tuple
+        ``(MatchGraph, file names)``.
+    shared : tuple
+        ``(refine, max_points_per_pair, seed)`` as :func:`register` takes them.
+
+    Returns
+    -------
+    (Registration, float)
+        The registration and the seconds it took.
+
+    Raises
+    ------
+    EstimationError
+        As :func:`register` (the stage records the set as failed, with the reason).
+    """
+    import time
+
+    graph, files = item
+    refine, max_points, seed = shared
+    t0 = time.perf_counter()
+    reg = register(graph, refine=refine, max_points_per_pair=max_points, rng=seed, ids=files)
+    return reg, time.perf_counter() - t0

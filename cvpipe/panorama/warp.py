@@ -374,3 +374,41 @@ def compose_inputs(images: Sequence[np.ndarray], reg: Registration, work_sizes: 
         img = images[a] if images[a].ndim == 3 else cv2.cvtColor(images[a], cv2.COLOR_GRAY2BGR)
         imgs.append(resize(img, size))
     return ComposeInputs(imgs, G, comp_sizes, reg.focal * scale, comp_sizes[ref_pos])
+
+
+def warp_set(item: tuple, p) -> tuple[Warped, dict, float]:
+    """Warp one registered set into its canvas: the per-set work of the ``panorama_warp`` stage, an item of
+    :func:`cvpipe.compute.map_items` (it may run on another machine: data in, data out).
+
+    Parameters
+    ----------
+    item : tuple
+        ``(registration record, images)``: the set's ``panorama_homographies`` JSON record and its full-size
+        images (BGR uint8; None for the images the registration did not use).
+    p : PanoramaWarpParams
+        ``compose_megapix``, ``projection``, ``max_canvas_megapix``.
+
+    Returns
+    -------
+    (Warped, dict, float)
+        The warped images and masks, the set's ``warp.json`` record (``ok``, ``corners``, ``size``, ``origin``,
+        ``G``, ``compose_sizes``, ``used``) and the seconds the warp took.
+
+    Raises
+    ------
+    EstimationError, BudgetError
+        As :func:`compose_inputs` and :func:`warp_images`.
+    """
+    import time
+
+    from .register import Registration
+
+    h, images = item
+    reg = Registration.from_json(h)
+    t0 = time.perf_counter()
+    comp = compose_inputs(images, reg, [tuple(s) for s in h["work_sizes"]], p.compose_megapix)
+    w = warp_images(comp.images, comp.G, p.projection, comp.focal, comp.ref_size, p.max_canvas_megapix)
+    seconds = time.perf_counter() - t0
+    record = {"ok": True, "corners": w.corners, "size": w.size, "origin": w.origin, "G": np.array(comp.G),
+              "compose_sizes": comp.sizes, "used": list(reg.used)}
+    return w, record, seconds

@@ -31,7 +31,7 @@ from .calibration import Calibration, parse_calibration, parse_middlebury_calib,
 from .depth import colorize, depth_from_disparity, parse_ply, ply_bytes, point_cloud
 from .epipolar import FundamentalFit, eight_point, epipoles, find_fundamental, sampson_distance, seven_point
 from .opencv_baseline import METHODS, SGBM_MODES, compute_disparity, disparity_opencv_bm, disparity_opencv_sgbm
-from .pipeline import KINDS, RectifiedPair, feature_matches, rectify_pair
+from .pipeline import KINDS, RectifiedPair, disparity_item, feature_matches, rectify_item, rectify_pair
 from .rectify import (DepthGeometry, Rectification, distortion, looks_rectified, max_disp_from_matches,
                       opencv_uncalibrated, rectified_depth_geometry, rectify_calibrated, rectify_uncalibrated,
                       rectifying_homographies, robust_disparity_range, warp_pair)
@@ -49,7 +49,7 @@ __all__ = [
     "DepthGeometry", "Rectification", "distortion", "robust_disparity_range", "rectifying_homographies",
     "rectify_uncalibrated", "opencv_uncalibrated", "rectify_calibrated", "rectified_depth_geometry", "warp_pair",
     "max_disp_from_matches", "looks_rectified",
-    "KINDS", "RectifiedPair", "feature_matches", "rectify_pair",
+    "KINDS", "RectifiedPair", "feature_matches", "rectify_pair", "rectify_item", "disparity_item",
     "depth_from_disparity", "point_cloud", "ply_bytes", "parse_ply", "colorize",
     "BAD_THRESHOLDS", "TRUTH_KEYS", "evaluate", "to_png16", "colorize_disparity", "error_picture", "metric_key",
     "pair_result", "metrics_of", "merge_dropped", "comparison_picture", "report_summary", "quality_plots",

@@ -140,3 +140,98 @@ def rectify_pair(left: np.ndarray, right: np.ndarray, pts1: np.ndarray, pts2: np
         record.update(max_disp=int(rect.max_disp), disparity_range_px=[float(v) for v in rect.disparity_range])
     lw, rw = rectify.warp_pair(left, right, rect)
     return RectifiedPair(lw, rw, record, q1, q2)
+
+
+def rectify_item(item: tuple, p) -> tuple[RectifiedPair, float]:
+    """Rectify one pair from its data: the per-pair work of the ``stereo_rectify`` stage, an item of
+    :func:`cvpipe.compute.map_items` (it may run on another machine: data in, data out).
+
+    Parameters
+    ----------
+    item : tuple
+        ``(left, right, calibration text or None, its file name for messages or None)``; the images BGR uint8.
+    p : StereoRectifyParams
+        The ``stereo.rectify`` section (sent once per worker).
+
+    Returns
+    -------
+    (RectifiedPair, float)
+        The pair and the seconds its matching and rectification took.
+
+    Raises
+    ------
+    InputError
+        A bad calibration file or image (a ``ValueError`` becomes one, so the stage drops the pair).
+    EstimationError
+        The pair cannot be rectified (the message says ``cannot be rectified: ...``).
+    """
+    import time
+
+    from ..errors import EstimationError
+    from .calibration import parse_calibration
+
+    left, right, calib_text, calib_name = item
+    try:
+        calib = None if calib_text is None else parse_calibration(calib_text, calib_name)
+        t0 = time.perf_counter()
+        p1, p2 = feature_matches(left, right, p.detector, p.max_features, p.ratio, p.seed)
+        got = rectify_pair(left, right, p1, p2, calib, threshold=p.threshold, margin=p.margin, seed=p.seed,
+                           rectified_max_dy=p.rectified_max_dy, rectified_share=p.rectified_share)
+    except EstimationError as exc:
+        raise EstimationError(f"cannot be rectified: {exc}") from None
+    except InputError:
+        raise
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    return got, time.perf_counter() - t0
+
+
+#: rows of a worker's first pair run once before its timed call (numba cache load / compilation, allocations)
+WARMUP_ROWS = 16
+_warm: set[str] = set()  # the methods this process has warmed up
+
+
+def disparity_item(item: tuple, shared: tuple) -> tuple[np.ndarray, dict[str, float]]:
+    """The disparity of one rectified pair: the per-pair work of the ``stereo_disparity`` stage, an item of
+    :func:`cvpipe.compute.map_items` (data in, data out).
+
+    Parameters
+    ----------
+    item : tuple
+        ``(left, right, max_disp)``: the rectified images and the pair's disparity range.
+    shared : tuple
+        ``(method, options)``: a key of :data:`cvpipe.stereo.METHODS` and its keyword options.
+
+    Returns
+    -------
+    (ndarray, dict)
+        The float32 disparity (NaN = none) and this item's wall times: ``disparity`` and, on the first pair a
+        process computes with ``method``, ``warmup`` (a run on the first :data:`WARMUP_ROWS` rows, so that the
+        timed call excludes the numba cache load).
+
+    Raises
+    ------
+    InputError
+        The pair or the options do not fit the method (a ``ValueError`` becomes one, so the stage drops the pair).
+    """
+    import time
+
+    from .opencv_baseline import compute_disparity
+
+    left, right, max_disp = item
+    method, options = shared
+    seconds = {}
+    try:
+        if method not in _warm:
+            t0 = time.perf_counter()
+            compute_disparity(left[:WARMUP_ROWS], right[:WARMUP_ROWS], max_disp, method, **options)
+            seconds["warmup"] = time.perf_counter() - t0
+            _warm.add(method)
+        t0 = time.perf_counter()
+        disp = compute_disparity(left, right, max_disp, method, **options)
+    except InputError:
+        raise
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    seconds["disparity"] = time.perf_counter() - t0
+    return disp, seconds
