@@ -19,6 +19,7 @@ import pytest
 import importlib
 
 from cvpipe import cli, matching, panorama
+from cvpipe.geometry import apply_homography
 from cvpipe.homography import find_homography
 from cvpipe.errors import EstimationError, InputError
 from cvpipe.params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams,
@@ -56,7 +57,7 @@ def _views(yaws=YAWS, gains=None):
 def _corner_error(H: np.ndarray, H_true: np.ndarray, size=VIEW) -> float:
     w, h = size
     c = np.array([[0, 0], [w - 1, 0], [w - 1, h - 1], [0, h - 1]], float)
-    return float(np.linalg.norm(panorama.warp.apply_h(H, c) - panorama.warp.apply_h(H_true, c), axis=1).mean())
+    return float(np.linalg.norm(apply_homography(H, c) - apply_homography(H_true, c), axis=1).mean())
 
 
 @pytest.fixture(scope="module")
@@ -245,7 +246,7 @@ def test_stitch_cli_json(tmp_path, views, capsys):
     # the reported homography of the reference view (input position 2, "v1.png") maps its centre into the panorama where
     # the panorama shows that same pixel
     H = np.array(res["homographies"][2])
-    x, y = panorama.warp.apply_h(H, np.array([[160.0, 120.0]]))[0]
+    x, y = apply_homography(H, np.array([[160.0, 120.0]]))[0]
     patch = pano[int(round(y)) - 10:int(round(y)) + 10, int(round(x)) - 10:int(round(x)) + 10].astype(int)
     assert np.abs(patch - imgs[1][110:130, 150:170].astype(int)).mean() < 6
 
@@ -416,7 +417,7 @@ def _exact_correspondences(G, sizes, edges, rng):
     for i, j in edges:
         w, h = sizes[i]
         src = rng.uniform([0, 0], [w - 1, h - 1], (400, 2))
-        dst = panorama.warp.apply_h(np.linalg.inv(G[j]) @ G[i], src)
+        dst = apply_homography(np.linalg.inv(G[j]) @ G[i], src)
         inside = (dst[:, 0] >= 0) & (dst[:, 0] < sizes[j][0]) & (dst[:, 1] >= 0) & (dst[:, 1] < sizes[j][1])
         H = np.linalg.inv(G[j]) @ G[i]
         out[(i, j)] = panorama.Edge(i, j, H / H[2, 2], src[inside], dst[inside], 5.0)
@@ -507,7 +508,7 @@ def test_refit_drops_imprecise_matches_and_recovers_the_homography():
     # over the right half: 200 precise matches (0.2 px noise), 150 imprecise ones displaced by 2.2-2.8 px in random
     # directions (inside the 3 px RANSAC threshold, so the first fit keeps them), and 100 gross outliers
     src = rng.uniform([320, 0], [640, 480], (450, 2))
-    dst = panorama.warp.apply_h(H_true, src)
+    dst = apply_homography(H_true, src)
     dst[:200] += rng.normal(0, 0.2, (200, 2))
     angle = rng.uniform(0, 2 * np.pi, 150)
     dst[200:350] += rng.uniform(2.2, 2.8, 150)[:, None] * np.column_stack([np.cos(angle), np.sin(angle)])

@@ -34,6 +34,7 @@ from .. import io, linalg, panorama
 from ..panorama import report as pictures
 from ..panorama import warp as warping
 from ..errors import EstimationError, InputError
+from ..geometry import apply_homography
 from ..metrics import corner_error
 from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
                       PanoramaWarpParams, replace)
@@ -119,10 +120,10 @@ def _accuracy(pano: panorama.Panorama, gt: dict, sizes: list) -> dict:
         w, h = sizes[i]
         gx, gy = np.meshgrid(np.linspace(0, w - 1, 24), np.linspace(0, h - 1, 24))
         g = np.column_stack([gx.ravel(), gy.ravel()])
-        t = warping.apply_h(H_gt, g)
+        t = apply_homography(H_gt, g)
         inside = (t[:, 0] >= 0) & (t[:, 0] <= sizes[j][0] - 1) & (t[:, 1] >= 0) & (t[:, 1] <= sizes[j][1] - 1)
         if inside.any():
-            overlap.append(float(np.linalg.norm(warping.apply_h(H, g[inside]) - t[inside], axis=1).mean()))
+            overlap.append(float(np.linalg.norm(apply_homography(H, g[inside]) - t[inside], axis=1).mean()))
     med = (lambda v: float(np.median(v)) if v else None)
     matched = [d for d in direct if np.isfinite(d)]
     direct_all = med(direct)

@@ -12,9 +12,9 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import EstimationError
+from ..geometry import apply_homography
 from ..linalg import solve_spd
 from .features import normalize_det
-from .warp import apply_h
 
 
 def _transfer_rms(G: dict, edges: dict) -> float:
@@ -22,7 +22,7 @@ def _transfer_rms(G: dict, edges: dict) -> float:
     for (i, j), e in edges.items():
         if i in G and j in G:
             Hij = np.linalg.inv(G[j]) @ G[i]
-            p = apply_h(Hij, e.src)
+            p = apply_homography(Hij, e.src)
             err += float(np.sum((p - e.dst) ** 2))
             cnt += len(e.src)
     return float(np.sqrt(err / max(cnt, 1)))

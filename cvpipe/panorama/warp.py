@@ -39,13 +39,6 @@ def check_projection(projection: str) -> None:
         raise ValueError(f"`projection` must be one of {list(PROJECTIONS)}, got {projection!r}")
 
 
-def apply_h(H: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """Apply the (3, 3) homography ``H`` to (N, 2) points; returns (N, 2) float64."""
-    pts = np.asarray(pts, np.float64).reshape(-1, 2)
-    p = pts @ H[:, :2].T + H[:, 2]
-    return p[:, :2] / p[:, 2:3]
-
-
 def camera_matrix(focal: float, ref_size: tuple[int, int]) -> np.ndarray:
     """``K`` of the reference camera: focal ``focal`` pixels, principal point at the image centre."""
     w, h = ref_size
