@@ -188,6 +188,16 @@ def difference_item(item: tuple, shared: tuple) -> tuple[dict, dict, float]:
     ------
     EstimationError, InputError
         As :func:`difference`, for the primary registration (the stage drops the probe with the reason).
+
+    Examples
+    --------
+    >>> import cv2
+    >>> from cvpipe.params import DefectDiffParams
+    >>> ref = cv2.GaussianBlur(np.random.default_rng(0).integers(0, 255, (96, 96)).astype(np.uint8), (0, 0), 2)
+    >>> probe = ref.copy(); probe[40:52, 40:52] = 255   # a bright square where the reference has texture
+    >>> arrays, fit, _ = difference_item((probe, np.ones(ref.shape, bool), None), (ref, DefectDiffParams()))
+    >>> sorted(arrays), sorted(fit)
+    (['bias', 'contrast', 'diff', 'gain', 'noise', 'valid'], ['primary'])
     """
     import time
 

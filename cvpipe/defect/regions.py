@@ -218,6 +218,20 @@ def regions_item(item: tuple, p: DefectRegionParams) -> tuple[dict, float]:
     -------
     (dict, float)
         The probe's ``results.json`` record, for the registration :func:`choose` keeps, and the seconds it took.
+
+    Examples
+    --------
+    >>> import cv2
+    >>> from cvpipe.defect import difference_item
+    >>> from cvpipe.params import DefectDiffParams, DefectRegionParams
+    >>> ref = cv2.GaussianBlur(np.random.default_rng(0).integers(0, 255, (96, 96)).astype(np.uint8), (0, 0), 2)
+    >>> probe = ref.copy(); probe[40:52, 40:52] = 255   # a bright square where the reference has texture
+    >>> arrays, _, _ = difference_item((probe, np.ones(ref.shape, bool), None), (ref, DefectDiffParams()))
+    >>> primary = {"H": np.eye(3).tolist(), "method": "features"}
+    >>> reg = {"file": "probe.png", "probe_shape": ref.shape, "primary": primary}
+    >>> record, _ = regions_item((arrays, reg), DefectRegionParams())
+    >>> record["verdict"], record["regions"].tolist()
+    ('faulty', [[38.0, 38.0, 53.0, 53.0]])
     """
     import time
 
