@@ -1,0 +1,77 @@
+"""The section-taking entry points (one parameter convention): each gives exactly what the keyword call with the
+section's fields gives, and refuses a parameters object of the wrong section with a one-line InputError naming
+``params``."""
+
+import numpy as np
+import pytest
+
+from cvpipe import features, hough, matching
+from cvpipe.errors import InputError
+from cvpipe.homography import estimate, estimate_with, transform_points
+from cvpipe.params import HomographyEstimateParams, HoughEdgesParams, HoughLinesParams, MatchParams
+
+
+def _scene(seed: int = 0) -> np.ndarray:
+    """A grey image with rectangles and noise: corners and edges for every detector."""
+    rng = np.random.default_rng(seed)
+    img = rng.integers(0, 40, (200, 260)).astype(np.uint8)
+    for _ in range(12):
+        x, y = rng.integers(0, 220), rng.integers(0, 160)
+        img[y:y + rng.integers(10, 40), x:x + rng.integers(10, 40)] = rng.integers(80, 255)
+    return img
+
+
+def _refused(call, wrong) -> None:
+    with pytest.raises(InputError, match=r"^`params` must be a \w+Params \(the [a-z. /]+ section\), got "
+                                         + type(wrong).__name__ + "$"):
+        call(wrong)
+
+
+@pytest.mark.parametrize("detector, cross_check", [("sift", False), ("orb", True)])
+def test_match_with_equals_keyword_match(detector, cross_check):
+    a, b = _scene(0), np.roll(_scene(0), (3, 5), axis=(0, 1))
+    fa, fb = features.detect(a, detector, 500), features.detect(b, detector, 500)
+    p = MatchParams(ratio=0.7, cross_check=cross_check)
+    got = matching.match_with(fa, fb, p)
+    want = matching.match(fa.descriptors, fb.descriptors, ratio=0.7, cross_check=cross_check, binary=fa.binary)
+    assert len(want) > 0  # the shifted copy matches: the comparison is not between two empty arrays
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(matching.match_with(fa, fb, None), matching.match_with(fa, fb, MatchParams()))
+
+
+def test_match_with_refuses_another_section():
+    fa = features.detect(_scene(0), "orb", 100)
+    _refused(lambda p: matching.match_with(fa, fa, p), HoughEdgesParams())
+    _refused(lambda p: matching.match_with(fa, fa, p), {"ratio": 0.8})
+
+
+def test_edges_of_equals_keyword_canny():
+    gray = _scene(1)
+    p = HoughEdgesParams(canny_low=30.0, canny_high=120.0, aperture=5, l2_gradient=True, blur_sigma=1.5)
+    got = hough.edges_of(gray, p)
+    want = hough.canny_edges(gray, 30.0, 120.0, aperture=5, l2_gradient=True, blur_sigma=1.5)
+    assert want.any()  # some edges, so equality says something
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(hough.edges_of(gray), hough.canny_edges(gray))  # None: the model's defaults
+
+
+def test_edges_of_refuses_another_section():
+    _refused(lambda p: hough.edges_of(_scene(1), p), HoughLinesParams())
+
+
+@pytest.mark.parametrize("method", ["ours", "opencv_ransac"])
+def test_estimate_with_equals_keyword_estimate(method):
+    rng = np.random.default_rng(3)
+    src = rng.uniform(0, 400, (60, 2))
+    dst = transform_points([[1.1, 0.05, 7.0], [-0.02, 0.95, -3.0], [1e-4, 0.0, 1.0]], src)
+    dst[:15] += rng.uniform(-40, 40, (15, 2))  # outliers, so RANSAC's sampling (and the seed) matters
+    p = HomographyEstimateParams(threshold=2.5, confidence=0.99, max_iters=500, seed=11)
+    got = estimate_with(src, dst, p, method)
+    want = estimate(method, src, dst, threshold=2.5, confidence=0.99, max_iters=500, rng=11)
+    np.testing.assert_array_equal(got.H, want.H)
+    np.testing.assert_array_equal(got.inliers, want.inliers)
+
+
+def test_estimate_with_refuses_another_section():
+    src = np.random.default_rng(0).uniform(0, 100, (10, 2))
+    _refused(lambda p: estimate_with(src, src, p, "ours"), MatchParams())
