@@ -75,3 +75,55 @@ def test_estimate_with_equals_keyword_estimate(method):
 def test_estimate_with_refuses_another_section():
     src = np.random.default_rng(0).uniform(0, 100, (10, 2))
     _refused(lambda p: estimate_with(src, src, p, "ours"), MatchParams())
+
+
+@pytest.fixture(scope="module")
+def crops():
+    from cvpipe.samples import photo
+
+    img = photo("astronaut")
+    return [img[:, 200:], img[:, :320]]  # two crops overlapping by 120 columns, right one first
+
+
+def test_panorama_steps_equal_keyword_calls(crops):
+    from cvpipe import panorama
+    from cvpipe.params import PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams
+
+    fp = PanoramaFeaturesParams(work_megapix=0.2, max_features=700, detector="sift")
+    sizes, feats = panorama.features_of(crops, fp)
+    grays, want_sizes = panorama.working_images(crops, 0.2)
+    want_feats = panorama.detect_all(grays, "sift", 700)
+    assert sizes == want_sizes
+    for got, want in zip(feats, want_feats):
+        np.testing.assert_array_equal(got.xy, want.xy)
+        np.testing.assert_array_equal(got.descriptors, want.descriptors)
+
+    mp = PanoramaMatchParams(ratio=0.75, ransac_threshold=2.5, min_inliers=12, candidates=3, refit_threshold=1.5)
+    graph = panorama.match_graph_with(feats, sizes, mp, 7)
+    want = panorama.match_graph(feats, sizes, ratio=0.75, ransac_threshold=2.5, min_inliers=12, min_confidence=1.0,
+                                candidates=3, refit_threshold=1.5, rng=7)
+    assert list(graph.edges) == list(want.edges) == [(0, 1)]  # the crops overlap: one edge to compare
+    np.testing.assert_array_equal(graph.inliers, want.inliers)
+    np.testing.assert_array_equal(graph.edges[0, 1].H, want.edges[0, 1].H)
+
+    hp = PanoramaHomographiesParams(refine="homography", max_points_per_pair=40)
+    reg = panorama.register_with(graph, hp, 5)
+    want_reg = panorama.register(graph, refine="homography", max_points_per_pair=40, rng=5)
+    assert reg.used == want_reg.used == (0, 1)
+    assert reg.G.keys() == want_reg.G.keys()
+    for k in want_reg.G:
+        np.testing.assert_array_equal(reg.G[k], want_reg.G[k])
+    reg_item, _ = panorama.register_set((graph, None), (hp, PanoramaMatchParams(seed=5)))
+    for k in want_reg.G:  # the stage's item: seeded by the match section's seed
+        np.testing.assert_array_equal(reg_item.G[k], want_reg.G[k])
+
+
+def test_panorama_steps_refuse_another_section(crops):
+    from cvpipe import panorama
+    from cvpipe.params import PanoramaFeaturesParams
+
+    _refused(lambda p: panorama.features_of(crops, p), MatchParams())
+    sizes, feats = panorama.features_of(crops, PanoramaFeaturesParams(work_megapix=0.1, max_features=300))
+    _refused(lambda p: panorama.match_graph_with(feats, sizes, p, 0), MatchParams())
+    graph = panorama.match_graph_with(feats, sizes, None, 0)
+    _refused(lambda p: panorama.register_with(graph, p, 0), PanoramaFeaturesParams())
