@@ -22,7 +22,7 @@ def _scene(seed: int = 0) -> np.ndarray:
 
 
 def _refused(call, wrong) -> None:
-    with pytest.raises(InputError, match=r"^`params` must be a \w+Params \(the [a-z. /]+ section\), got "
+    with pytest.raises(InputError, match=r"^`params` must be a \w+Params \(the [a-z<>. /]+ section\), got "
                                          + type(wrong).__name__ + "$"):
         call(wrong)
 
@@ -127,3 +127,32 @@ def test_panorama_steps_refuse_another_section(crops):
     _refused(lambda p: panorama.match_graph_with(feats, sizes, p, 0), MatchParams())
     graph = panorama.match_graph_with(feats, sizes, None, 0)
     _refused(lambda p: panorama.register_with(graph, p, 0), PanoramaFeaturesParams())
+
+
+@pytest.mark.parametrize("detector", ["sift", "orb"])
+def test_detect_with_equals_keyword_detect(detector):
+    from cvpipe.params import LogoFeaturesParams
+
+    gray = _scene(2)
+    p = LogoFeaturesParams(detector=detector, max_features=300, scene_min_long_side=400)
+    for scene, min_long_side in ((False, 0), (True, 400)):  # 260 px long side: a scene is enlarged to 400
+        got = features.detect_with(gray, p, scene=scene)
+        want = features.detect(gray, detector, 300, min_long_side=min_long_side)
+        assert len(want.xy) > 0  # features to compare
+        np.testing.assert_array_equal(got.xy, want.xy)
+        np.testing.assert_array_equal(got.descriptors, want.descriptors)
+        arrays, _ = features.detect_item((gray, scene), p)  # the stage's item
+        np.testing.assert_array_equal(arrays["xy"], want.xy)
+    # a section without scene_min_long_side detects a scene at its size
+    plain = features.detect_with(gray, features_params(detector), scene=True)
+    np.testing.assert_array_equal(plain.xy, features.detect(gray, detector, 4000).xy)
+
+
+def features_params(detector):
+    from cvpipe.params import FeaturesParams
+
+    return FeaturesParams(detector=detector)
+
+
+def test_detect_with_refuses_another_section():
+    _refused(lambda p: features.detect_with(_scene(2), p), MatchParams())
