@@ -156,3 +156,29 @@ def features_params(detector):
 
 def test_detect_with_refuses_another_section():
     _refused(lambda p: features.detect_with(_scene(2), p), MatchParams())
+
+
+@pytest.mark.parametrize("method", ["opencv_bm", "opencv_sgbm"])
+def test_disparity_with_equals_keyword_call(method):
+    from cvpipe import stereo
+    from cvpipe.params import StereoBmParams, StereoSgbmParams
+
+    right = _scene(4)
+    left = np.roll(right, 5, axis=1)  # a 5 px disparity everywhere
+    p = StereoBmParams(block_size=11, uniqueness=5) if method == "opencv_bm" else \
+        StereoSgbmParams(block_size=5, mode="hh", uniqueness=5)
+    got = stereo.disparity_with(left, right, 32, p, method)
+    options = {k: getattr(p, k) for k in type(p).model_fields}
+    want = stereo.compute_disparity(left, right, 32, method, **options)
+    assert np.isfinite(want).any()  # some disparities to compare
+    np.testing.assert_array_equal(got, want)  # NaN at the same places too
+
+
+def test_disparity_with_refuses_another_section():
+    from cvpipe import stereo
+    from cvpipe.params import StereoBmParams
+
+    g = _scene(4)
+    _refused(lambda p: stereo.disparity_with(g, g, 16, p, "sgm"), StereoBmParams())  # sgm takes stereo.sgm
+    with pytest.raises(InputError, match=r"^`method` must be one of \['opencv_bm', 'opencv_sgbm', 'sgm'\], got 'x'$"):
+        stereo.disparity_with(g, g, 16, None, "x")
