@@ -182,3 +182,23 @@ def test_disparity_with_refuses_another_section():
     _refused(lambda p: stereo.disparity_with(g, g, 16, p, "sgm"), StereoBmParams())  # sgm takes stereo.sgm
     with pytest.raises(InputError, match=r"^`method` must be one of \['opencv_bm', 'opencv_sgbm', 'sgm'\], got 'x'$"):
         stereo.disparity_with(g, g, 16, None, "x")
+
+
+def test_samples_build_equals_keyword_build_all():
+    from cvpipe import samples
+    from cvpipe.params import SamplesParams
+
+    got = samples.build(SamplesParams(seed=5, logo_scenes=2, logo_negatives=1))
+    want = samples.build_all(5, logo_scenes=2, logo_negatives=1)
+    assert got.keys() == want.keys()
+    for task in want:
+        assert got[task].images.keys() == want[task].images.keys() and want[task].images  # images to compare
+        for name, img in want[task].images.items():
+            np.testing.assert_array_equal(got[task].images[name], img)
+        assert got[task].truth == want[task].truth
+
+
+def test_samples_build_refuses_another_section():
+    from cvpipe import samples
+
+    _refused(samples.build, MatchParams())
