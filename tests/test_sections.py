@@ -202,3 +202,15 @@ def test_samples_build_refuses_another_section():
     from cvpipe import samples
 
     _refused(samples.build, MatchParams())
+
+
+# the modules whose section entry points' Examples no other test module runs
+@pytest.mark.parametrize("name", ["cvpipe.features", "cvpipe.panorama.match", "cvpipe.samples",
+                                  "cvpipe.stereo.opencv_baseline"])
+def test_entry_point_examples_run(name):
+    import doctest
+    import importlib
+
+    result = doctest.testmod(importlib.import_module(name), optionflags=doctest.NORMALIZE_WHITESPACE)
+    assert result.attempted > 0, f"{name} has no Examples section"
+    assert result.failed == 0, f"{result.failed} of {result.attempted} examples of {name} failed"
