@@ -204,9 +204,25 @@ def test_samples_build_refuses_another_section():
     _refused(samples.build, MatchParams())
 
 
+
+def test_opencv_stitch_with_makes_the_keyword_call(crops, monkeypatch):
+    # cv2.Stitcher is not repeatable within a process (the same call gave 511 and 507 rows), so the test checks
+    # that the section call makes exactly the keyword call, not that two stitches agree
+    from cvpipe import panorama
+    from cvpipe.panorama import opencv_baseline
+    from cvpipe.params import PanoramaFeaturesParams, PanoramaMatchParams, PanoramaWarpParams
+
+    calls = []
+    monkeypatch.setattr(opencv_baseline, "opencv_stitch", lambda *args: calls.append(args) or ("OK", None, []))
+    fp, mp, wp = PanoramaFeaturesParams(work_megapix=0.2), PanoramaMatchParams(min_confidence=0.8), \
+        PanoramaWarpParams(compose_megapix=0.3)
+    assert panorama.opencv_stitch_with(crops, fp, mp, wp) == ("OK", None, [])
+    assert calls == [(crops, 0.2, 0.3, 0.8)]  # work_megapix, compose_megapix, min_confidence
+    _refused(lambda p: panorama.opencv_stitch_with(crops, fp, p, wp), PanoramaWarpParams())
+
 # the modules whose section entry points' Examples no other test module runs
-@pytest.mark.parametrize("name", ["cvpipe.features", "cvpipe.panorama.match", "cvpipe.samples",
-                                  "cvpipe.stereo.opencv_baseline"])
+@pytest.mark.parametrize("name", ["cvpipe.features", "cvpipe.panorama.match", "cvpipe.panorama.opencv_baseline",
+                                  "cvpipe.samples", "cvpipe.stereo.opencv_baseline"])
 def test_entry_point_examples_run(name):
     import doctest
     import importlib
