@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 
 from .errors import BudgetWarning, InputError, memory_budget
+from .params import FeaturesParams, section_or_default
 
 
 def opencv_factory(name: str) -> Callable[..., cv2.Feature2D]:
@@ -203,7 +204,43 @@ def detect(gray: np.ndarray, detector: str = "sift", max_features: int = 4000,
     return Features(xy, size, angle, response[order], np.ascontiguousarray(desc[order]), detector)
 
 
-def detect_item(item: tuple, shared: tuple) -> tuple[dict[str, np.ndarray], float]:
+def detect_with(gray: np.ndarray, params: FeaturesParams | None = None, *, scene: bool = False) -> Features:
+    """:func:`detect` with a ``<task>.features`` section (``homography.features``, ``defect.features``,
+    ``logo.features``, ...): its ``detector`` and ``max_features``, and for a ``scene`` photo the section's
+    ``scene_min_long_side`` when it has one (``logo.features``).
+
+    Parameters
+    ----------
+    gray : (H, W) uint8
+        Grayscale image.
+    params : FeaturesParams or None
+        The section, any :class:`~cvpipe.params.FeaturesParams` (None: its defaults).
+    scene : bool
+        The image is a scene photo (enlarged to ``scene_min_long_side`` when smaller); otherwise detected at its
+        size.
+
+    Returns
+    -------
+    Features
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cvpipe.params import FeaturesParams, LogoFeaturesParams
+    >>> img = np.zeros((120, 160), np.uint8)
+    >>> img[30:90, 40:70] = 200; img[50:70, 100:140] = 120
+    >>> f = detect_with(img, FeaturesParams(detector="orb", max_features=50))
+    >>> f.detector, len(f.xy) <= 50
+    ('orb', True)
+    >>> g = detect_with(img, LogoFeaturesParams(scene_min_long_side=320), scene=True)  # found on a 2x enlargement
+    >>> np.array_equal(g.xy, detect(img, "sift", 4000, min_long_side=320).xy)
+    True
+    """
+    p = section_or_default(params, FeaturesParams, "<task>.features")
+    return detect(gray, p.detector, p.max_features, min_long_side=getattr(p, "scene_min_long_side", 0) if scene else 0)
+
+
+def detect_item(item: tuple, shared: FeaturesParams) -> tuple[dict[str, np.ndarray], float]:
     """Keypoints and descriptors of one image as the arrays of its ``.npz``: the per-image work of the
     ``<task>_features`` stages, an item of :func:`cvpipe.compute.map_items` (it may run on another machine: data
     in, data out).
@@ -211,9 +248,9 @@ def detect_item(item: tuple, shared: tuple) -> tuple[dict[str, np.ndarray], floa
     Parameters
     ----------
     item : tuple
-        ``(gray image, min_long_side)`` (as :func:`detect` takes them).
-    shared : tuple
-        ``(detector, max_features)``.
+        ``(gray image, scene)``: the image and whether it is a scene photo (:func:`detect_with`).
+    shared : FeaturesParams
+        The ``<task>.features`` section.
 
     Returns
     -------
@@ -222,9 +259,8 @@ def detect_item(item: tuple, shared: tuple) -> tuple[dict[str, np.ndarray], floa
     """
     import time
 
-    gray, min_long_side = item
-    detector, max_features = shared
+    gray, scene = item
     t0 = time.perf_counter()
-    feats = detect(gray, detector, max_features, min_long_side=min_long_side)
+    feats = detect_with(gray, shared, scene=scene)
     seconds = time.perf_counter() - t0
     return {**feats.to_arrays(), "image_size": gray.shape[::-1]}, seconds

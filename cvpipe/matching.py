@@ -4,8 +4,15 @@ product (:func:`nearest_two`, :func:`ratio_matches`)."""
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import cv2
 import numpy as np
+
+from .params import MatchParams, section_or_default
+
+if TYPE_CHECKING:
+    from .features import Features
 
 #: FLANN's randomised KD-tree index
 FLANN_KDTREE = 1
@@ -127,6 +134,39 @@ def match(desc_a: np.ndarray, desc_b: np.ndarray, ratio: float = 0.8, cross_chec
         pairs, dists = pairs[keep], dists[keep]
     order = np.argsort(dists, kind="stable")
     return pairs[order]
+
+
+def match_with(a: Features, b: Features, params: MatchParams | None = None) -> np.ndarray:
+    """Match the features of image A to image B with a ``<task>.match`` section (``homography.match``,
+    ``defect.match``): :func:`match` of their descriptors with the section's ``ratio`` and ``cross_check``, Hamming
+    distance when A's detector is binary.
+
+    Parameters
+    ----------
+    a, b : Features
+        The two images' features (:func:`cvpipe.features.detect`), from the same detector.
+    params : MatchParams or None
+        The section (None: its defaults).
+
+    Returns
+    -------
+    (M, 2) int64
+        Index pairs ``[i_a, i_b]``, as :func:`match`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cvpipe.features import detect
+    >>> from cvpipe.params import MatchParams
+    >>> img = np.zeros((120, 160), np.uint8)
+    >>> img[30:90, 40:70] = 200; img[50:70, 100:140] = 120
+    >>> fa = detect(img, "orb", 200)
+    >>> idx = match_with(fa, fa, MatchParams(ratio=1.0, cross_check=True))
+    >>> bool(len(idx) > 0 and (idx[:, 0] == idx[:, 1]).all())  # every feature matches itself
+    True
+    """
+    p = section_or_default(params, MatchParams, "homography.match / defect.match")
+    return match(a.descriptors, b.descriptors, p.ratio, p.cross_check, a.binary)
 
 
 #: most entries of one block of the query x train distance matrix in :func:`nearest_two` (16 M float32 = 64 MB)

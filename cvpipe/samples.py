@@ -13,6 +13,8 @@ from typing import Any
 import cv2
 import numpy as np
 
+from .params import SamplesParams, section_or_default
+
 #: gallery brands (simple-icons slugs, CC0 marks with enough shape detail for local features)
 LOGO_BRANDS = ("starbucks", "raspberrypi", "linux", "redbull", "ferrari",
                "porsche", "lamborghini", "cocacola", "unilever", "docker")
@@ -446,8 +448,24 @@ def make_panorama(rng: np.random.Generator) -> SampleSet:
     return out
 
 
-def build_all(seed: int, logo_scenes: int = 40, logo_negatives: int = 12) -> dict[str, SampleSet]:
-    """Every task's sample set from one seed (each task gets its own child stream, so they stay independent)."""
+def build(params: SamplesParams | None = None) -> dict[str, SampleSet]:
+    """Every task's sample set with the ``samples`` section (``seed``, ``logo_scenes``, ``logo_negatives``): the
+    ``samples`` stage's entry point.
+
+    Examples
+    --------
+    >>> from cvpipe.params import SamplesParams
+    >>> sets = build(SamplesParams(seed=3, logo_scenes=2, logo_negatives=1))
+    >>> sorted(sets)
+    ['defect', 'homography', 'hough', 'logo', 'panorama', 'stereo']
+    """
+    p = section_or_default(params, SamplesParams, "samples")
+    return build_all(p.seed, p.logo_scenes, p.logo_negatives)
+
+
+def build_all(seed: int, logo_scenes: int, logo_negatives: int) -> dict[str, SampleSet]:
+    """Every task's sample set from one seed (each task gets its own child stream, so they stay independent); the
+    counts' defaults are the ``samples`` section's (:func:`build`)."""
     streams = np.random.SeedSequence(seed).spawn(6)  # child i depends on i only: adding one kept the others
     rngs = [np.random.default_rng(s) for s in streams]
     return {

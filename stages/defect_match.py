@@ -25,8 +25,7 @@ def defect_match(st: Stage) -> None:
             st.drop(probe.path.name, skipped.get(f"probes/{probe.path.name}", "no keypoints from defect_features"))
             continue
         with st.timer("match"):
-            idx = matching.match(ref.descriptors, Features.from_arrays(io.load_npz(path)).descriptors, p.ratio,
-                                 p.cross_check, ref.binary)
+            idx = matching.match_with(ref, Features.from_arrays(io.load_npz(path)), p)
         io.save_npz(out / f"{probe.name}.npz", index=idx)
         counts[probe.name] = len(idx)
     if not counts:

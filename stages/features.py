@@ -26,6 +26,7 @@ def features_stage(st: Stage) -> None:
     p = load_section(SECTIONS.get(a.section, FeaturesParams), a.section, a.params)
     detector = a.detector or p.detector
     features.check_detector(detector)
+    p = p.replace(detector=detector)  # the matrix stages' --detector
     root, out = Path(a.images), Path(a.out)
     files = images_under(root)
     if not files:
@@ -46,10 +47,9 @@ def features_stage(st: Stage) -> None:
                 yield exc
                 continue
             made[npz] = rel
-            is_scene = a.scenes is not None and rel.parts[0] == a.scenes
-            yield gray, getattr(p, "scene_min_long_side", 0) if is_scene else 0
+            yield gray, a.scenes is not None and rel.parts[0] == a.scenes
 
-    for name, (arrays, seconds) in st.map(features.detect_item, image_data(), shared=(detector, p.max_features),
+    for name, (arrays, seconds) in st.map(features.detect_item, image_data(), shared=p,
                                           desc=f"features {detector}", names=[r.as_posix() for r in rels]):
         st.timings["detect"] = st.timings.get("detect", 0.0) + seconds
         io.save_npz(out / Path(name).with_suffix(".npz"), **arrays)

@@ -12,14 +12,13 @@ from stages._runner import Stage, run
 
 def homography_estimate(st: Stage) -> None:
     p, a = st.params, st.args
-    kw = dict(threshold=p.threshold, confidence=p.confidence, max_iters=p.max_iters, rng=p.seed)
     files = sorted(Path(a.matches).glob("*.npz"))
     if not files:
         raise InputError(f"{a.matches}: no <pair>.npz matches (run homography_match)")
     out, results = Path(a.out), {}
     pairs = (tuple(io.load_npz(f)[k] for k in ("src", "dst")) for f in files)  # read lazily, sent with the task
     first = True
-    for name, (fit, seconds) in st.map(estimate_item, pairs, shared=(a.method, kw), desc=f"estimate {a.method}",
+    for name, (fit, seconds) in st.map(estimate_item, pairs, shared=(a.method, p), desc=f"estimate {a.method}",
                                        names=[f.stem for f in files]):
         key = "first_call" if first and not st.dropped else "estimates"  # numba cache load first
         st.timings[key] = st.timings.get(key, 0.0) + seconds

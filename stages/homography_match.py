@@ -29,7 +29,7 @@ def homography_match(st: Stage) -> None:
         try:
             A, B = Features.from_arrays(fa), Features.from_arrays(fb)
             with st.timer("match"):
-                idx = matching.match(A.descriptors, B.descriptors, p.ratio, p.cross_check, A.binary)
+                idx = matching.match_with(A, B, p)
         except (CvpipeError, ValueError) as exc:
             st.drop(pair.name, str(exc))
             continue

@@ -18,8 +18,7 @@ def hough_edges(st: Stage) -> None:
         except InputError as exc:
             st.drop(it.path.name, str(exc))
             continue
-        edges = hough.canny_edges(gray, p.canny_low, p.canny_high, aperture=p.aperture, l2_gradient=p.l2_gradient,
-                                  blur_sigma=p.blur_sigma)
+        edges = hough.edges_of(gray, p)
         io.save_image(out / f"{it.name}.png", edges)
         made += 1
     st.finish(out, made, f"edge maps in {out}", f"{st.args.images}: no readable image")

@@ -46,8 +46,7 @@ def panorama_features(st: Stage) -> None:
             st.drop(s.name, f"{len(got)} usable image(s), a panorama needs at least 2")
             continue
         with st.timer("features"):
-            grays, sizes = panorama.working_images([img for _, img in got], p.work_megapix)
-            feats = panorama.detect_all(grays, p.detector, p.max_features)
+            sizes, feats = panorama.features_of([img for _, img in got], p)
         for (f, img), size, ft in zip(got, sizes, feats):
             io.save_npz(out / s.name / f"{f.stem}.npz", **ft.to_arrays(), work_size=size,
                         full_size=(img.shape[1], img.shape[0]), image_file=f.name)

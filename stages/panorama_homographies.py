@@ -11,7 +11,6 @@ from stages._runner import Stage, run
 
 def panorama_homographies(st: Stage) -> None:
     p, out = st.params, Path(st.args.out)
-    seed = st.sections["panorama.match"].seed
     ok, files = 0, sorted(Path(st.args.matches).glob("*.npz"))
     recs = {}  # a set's graph travels with its task; its file names and sizes stay here for its record
 
@@ -24,7 +23,7 @@ def panorama_homographies(st: Stage) -> None:
 
     for name, failed, got in pr.map_sets(st, "panorama_homographies", [(f.stem, {}) for f in files],
                                          panorama.register_set, set_data,
-                                         (p.refine, p.max_points_per_pair, seed), "panorama homographies"):
+                                         (p, st.sections["panorama.match"]), "panorama homographies"):
         rec = recs.pop(name)
         if failed is not None:  # recorded, so the later stages and the report say which set failed and why
             rec.update(failed)

@@ -10,9 +10,7 @@ from stages._runner import Stage, run
 
 def panorama_opencv_stitcher(st: Stage) -> None:
     out = Path(st.args.out)
-    work = st.sections["panorama.features"].work_megapix
-    conf = st.sections["panorama.match"].min_confidence
-    compose = st.sections["panorama.warp"].compose_megapix
+    sections = [st.sections[f"panorama.{k}"] for k in ("features", "match", "warp")]
     sets, _ = datasets.find_panorama(st.args.images)  # what the layout drops, panorama_features reports
     made = 0
     for s in st.progress(sets, "cv2.Stitcher"):
@@ -24,7 +22,7 @@ def panorama_opencv_stitcher(st: Stage) -> None:
             except InputError as exc:
                 st.drop(f"{s.name}/{f.name}", str(exc))
         with st.timer("stitch"):
-            status, pano, used = panorama.opencv_stitch(images, work, compose, conf) if len(images) >= 2 else \
+            status, pano, used = panorama.opencv_stitch_with(images, *sections) if len(images) >= 2 else \
                 ("ERR_NEED_MORE_IMGS", None, [])
         result = {"ok": status == "OK", "status": status, "used": used, "files": files}
         if pano is not None:

@@ -12,8 +12,7 @@ from stages._runner import Stage, run
 
 
 def build_samples(st: Stage) -> None:
-    p = st.params
-    sets = samples.build_all(p.seed, p.logo_scenes, p.logo_negatives)
+    sets = samples.build(st.params)
     out = Path(st.args.out)
     tmp = out.with_name(f".{out.name}.tmp")
     shutil.rmtree(tmp, ignore_errors=True)

@@ -28,7 +28,7 @@ def read_truth(path: Path, shape: tuple[int, ...]) -> np.ndarray:
 
 def stereo_disparity(st: Stage) -> None:
     a, method = st.args, st.args.method
-    options = load_section(SECTIONS[f"stereo.{method}"], f"stereo.{method}", a.params).model_dump()
+    section = load_section(SECTIONS[f"stereo.{method}"], f"stereo.{method}", a.params)
     rectified = Path(a.rectified)
     rects = io.load_json(rectified / "run.json")["pairs"]
     pairs, _ = datasets.find_stereo(a.pairs)  # what it drops and what could not be rectified, stereo_rectify recorded
@@ -50,7 +50,7 @@ def stereo_disparity(st: Stage) -> None:
                 yield exc
 
     by_name = {q.name: q for q in todo}
-    for name, (disp, seconds) in st.map(stereo.disparity_item, pair_data(), shared=(method, options),
+    for name, (disp, seconds) in st.map(stereo.disparity_item, pair_data(), shared=(method, section),
                                         desc=f"disparity {method}", names=list(by_name)):
         pair = by_name[name]
         st.timings["warmup"] = st.timings.get("warmup", 0.0) + seconds.get("warmup", 0.0)

@@ -13,9 +13,9 @@ import cv2
 import numpy as np
 
 from ..errors import EstimationError, InputError
-from ..features import Features, detect
+from ..features import Features, detect_with
 from ..homography import find_homography
-from ..matching import match
+from ..matching import match_with
 from ..params import DefectFeaturesParams, DefectRegisterParams, FeaturesParams, MatchParams
 from ._util import check_gray, check_homography
 
@@ -201,13 +201,13 @@ def _reason(exc: Exception) -> str:
 
 def _feature_homography(reference, probe, p, fp, mp, fr, fq, matches) -> tuple[np.ndarray, int, int]:
     """RANSAC homography from keypoint matches; EstimationError (saying why) when they do not support one."""
-    fr = fr if fr is not None else detect(reference, fp.detector, fp.max_features)
-    fq = fq if fq is not None else detect(probe, fp.detector, fp.max_features)
+    fr = fr if fr is not None else detect_with(reference, fp)
+    fq = fq if fq is not None else detect_with(probe, fp)
     if len(fr) < p.min_inliers or len(fq) < p.min_inliers:
         raise EstimationError(f"registration failed: only {len(fr)} reference and {len(fq)} probe keypoints "
                               f"(need {p.min_inliers}); is the probe blank or featureless?")
     if matches is None:
-        matches = match(fr.descriptors, fq.descriptors, mp.ratio, mp.cross_check, fr.binary)
+        matches = match_with(fr, fq, mp)
     matches = np.asarray(matches, np.int64).reshape(-1, 2)
     if len(matches) < p.min_inliers:
         raise EstimationError(f"registration failed: only {len(matches)} descriptor matches (need "

@@ -22,7 +22,8 @@ The per-hypothesis loop, scoring and refinement are numba kernels (``cache=True`
 ``NUMBA_CACHE_DIR`` compiles them, about 30 s of CPU once; later processes load them in about a second). Random numbers come from a ``numpy.random.Generator`` in chunks, so
 a seeded ``rng`` reproduces a result exactly.
 
-Modules: :mod:`~cvpipe.homography.estimate` (``find_homography``, ``estimate``, the OpenCV methods, the test against
+Modules: :mod:`~cvpipe.homography.estimate` (``find_homography``, ``estimate``, ``estimate_with`` for the
+``homography.estimate`` section, the OpenCV methods, the test against
 chance), :mod:`~cvpipe.homography.dlt`, :mod:`~cvpipe.homography.match` (``correspondences``),
 :mod:`~cvpipe.homography.report` (pictures, metrics, summary), and the numba kernels in ``_kernels`` /
 ``_ransac_kernels``.
@@ -39,6 +40,7 @@ from .estimate import (
     check_significant,
     estimate,
     estimate_item,
+    estimate_with,
     find_homography,
     log10_nfa,
     points_area,
@@ -58,6 +60,7 @@ from .report import (
 __all__ = [
     "DEFAULT_MAX_ITERS", "MAX_NFA", "METHODS", "HomographyFit", "alignment_checkerboard", "alignment_panel",
     "chance_probability", "check_significant", "compare_methods", "correspondences", "dlt", "estimate", "estimate_item",
+    "estimate_with",
     "find_homography", "hartley_normalization", "log10_nfa", "metric_key", "metrics_of", "picture_panels",
     "points_area", "quality_plots", "report_summary", "transform_points",
 ]

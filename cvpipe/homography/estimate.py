@@ -12,6 +12,7 @@ import numpy as np
 
 from ..errors import EstimationError, InputError
 from ..geometry import as_points
+from ..params import HomographyEstimateParams, section_or_default
 from ._kernels import _chance_hits, _finalize, _normalize, _sq_errors
 from ._ransac_kernels import _SPRT_TM, _collapsed, _ransac_chunk, _sprt_threshold
 from .dlt import _check_pair, _unit_h22
@@ -424,6 +425,38 @@ def estimate(method: str, src, dst, **kwargs) -> HomographyFit:
     return fit
 
 
+def estimate_with(src, dst, params: HomographyEstimateParams | None, method: str) -> HomographyFit:
+    """:func:`estimate` with the ``homography.estimate`` section: its ``threshold`` (pixels), ``confidence``,
+    ``max_iters`` and ``seed`` (the RANSAC ``rng``; OpenCV's methods ignore it).
+
+    Parameters
+    ----------
+    src, dst : array_like, shape (N, 2)
+        Matched points, ``dst ~ H src``.
+    params : HomographyEstimateParams or None
+        The ``homography.estimate`` section (None: its defaults).
+    method : str
+        A key of :data:`METHODS`.
+
+    Returns
+    -------
+    HomographyFit
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cvpipe.homography import transform_points
+    >>> from cvpipe.params import HomographyEstimateParams
+    >>> src = np.random.default_rng(1).uniform(0, 500, (30, 2))
+    >>> dst = transform_points([[1.0, 0.1, 3.0], [0.0, 1.2, -4.0], [0.0, 1e-4, 1.0]], src)
+    >>> estimate_with(src, dst, HomographyEstimateParams(threshold=2.0), "ours").num_inliers
+    30
+    """
+    p = section_or_default(params, HomographyEstimateParams, "homography.estimate")
+    return estimate(method, src, dst, threshold=p.threshold, confidence=p.confidence, max_iters=p.max_iters,
+                    rng=p.seed)
+
+
 def estimate_item(item: tuple, shared: tuple) -> tuple[HomographyFit, float]:
     """One pair's homography: the per-pair work of the ``homography_estimate`` stage, an item of
     :func:`cvpipe.compute.map_items` (it may run on another machine: data in, data out).
@@ -433,7 +466,8 @@ def estimate_item(item: tuple, shared: tuple) -> tuple[HomographyFit, float]:
     item : tuple
         ``(src, dst)``: the pair's (N, 2) matched points.
     shared : tuple
-        ``(method, kwargs)``: a key of :data:`METHODS` and the keyword arguments of :func:`estimate`.
+        ``(method, HomographyEstimateParams)``: a key of :data:`METHODS` and the ``homography.estimate`` section
+        (:func:`estimate_with`).
 
     Returns
     -------
@@ -443,15 +477,15 @@ def estimate_item(item: tuple, shared: tuple) -> tuple[HomographyFit, float]:
     Raises
     ------
     EstimationError, InputError
-        As :func:`estimate`, the message prefixed with the number of matches (``"12 matches: ..."``).
+        As :func:`estimate_with`, the message prefixed with the number of matches (``"12 matches: ..."``).
     """
     import time
 
     src, dst = item
-    method, kwargs = shared
+    method, params = shared
     t0 = time.perf_counter()
     try:
-        fit = estimate(method, src, dst, **kwargs)
+        fit = estimate_with(src, dst, params, method)
     except (EstimationError, InputError) as exc:
         raise type(exc)(f"{len(src)} matches: {exc}") from None
     return fit, time.perf_counter() - t0

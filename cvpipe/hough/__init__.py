@@ -1,6 +1,6 @@
 """Hough line detection, one module per step.
 
-- :mod:`~cvpipe.hough.edges`: Canny edge maps (``canny_edges``);
+- :mod:`~cvpipe.hough.edges`: Canny edge maps (``canny_edges``, and ``edges_of`` with the ``hough.edges`` section);
 - :mod:`~cvpipe.hough.transform`: the standard transform with ``cv2.HoughLines`` semantics (``hough_lines``,
   ``hough_grid``, ``hough_accumulator``), OpenCV's as the baseline (``hough_lines_opencv``, ``IMPLEMENTATIONS``)
   and the entry point that takes the ``hough.lines`` section (``detect_lines``, units by ``hough_steps``);
@@ -11,7 +11,7 @@
   this package (or ``cvpipe hough --method opencv``) does not import numba.
 """
 
-from .edges import canny_edges
+from .edges import canny_edges, edges_of
 from .evaluate import (cell_agreement, compare_runs, line_cells, line_segment_matches, lines_item, median_seconds,
                        metrics_of, segment_segment_matches, truth_matches)
 from .probabilistic import hough_lines_probabilistic
@@ -31,6 +31,7 @@ __all__ = [
     "detect_lines",
     "hough_lines_probabilistic",
     "canny_edges",
+    "edges_of",
     "line_cells",
     "cell_agreement",
     "line_segment_matches",

@@ -6,8 +6,9 @@ import cv2
 import numpy as np
 
 from ..errors import InputError
+from ..params import HoughEdgesParams, section_or_default
 
-__all__ = ["canny_edges"]
+__all__ = ["canny_edges", "edges_of"]
 
 
 def canny_edges(gray: np.ndarray, low: float = 50.0, high: float = 150.0, *, aperture: int = 3,
@@ -50,3 +51,34 @@ def canny_edges(gray: np.ndarray, low: float = 50.0, high: float = 150.0, *, ape
     if blur_sigma > 0:
         gray = cv2.GaussianBlur(gray, (0, 0), blur_sigma)
     return cv2.Canny(gray, float(low), float(high), apertureSize=aperture, L2gradient=bool(l2_gradient))
+
+
+def edges_of(gray: np.ndarray, params: HoughEdgesParams | None = None) -> np.ndarray:
+    """The edge map of the ``hough_edges`` stage: :func:`canny_edges` with the ``hough.edges`` section.
+
+    Parameters
+    ----------
+    gray : ndarray, shape (H, W), uint8
+        Grayscale image.
+    params : HoughEdgesParams or None
+        The ``hough.edges`` section (``canny_low``, ``canny_high``, ``aperture``, ``l2_gradient``, ``blur_sigma``;
+        None: its defaults).
+
+    Returns
+    -------
+    ndarray, shape (H, W), uint8
+        255 = edge, as :func:`canny_edges`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cvpipe.params import HoughEdgesParams
+    >>> gray = np.zeros((40, 40), np.uint8)
+    >>> gray[10:30, 10:30] = 200
+    >>> np.array_equal(edges_of(gray, HoughEdgesParams(canny_low=40.0, blur_sigma=1.0)),
+    ...                canny_edges(gray, 40.0, 150.0, blur_sigma=1.0))
+    True
+    """
+    p = section_or_default(params, HoughEdgesParams, "hough.edges")
+    return canny_edges(gray, p.canny_low, p.canny_high, aperture=p.aperture, l2_gradient=p.l2_gradient,
+                       blur_sigma=p.blur_sigma)

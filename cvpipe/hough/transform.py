@@ -33,7 +33,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError, check_memory
-from ..params import HoughLinesParams
+from ..params import HoughLinesParams, section_or_default
 
 __all__ = ["HoughGrid", "hough_grid", "hough_accumulator", "hough_lines", "hough_lines_opencv", "IMPLEMENTATIONS",
            "get_impl", "hough_steps", "detect_lines"]
@@ -377,9 +377,7 @@ def hough_steps(params: HoughLinesParams | None = None) -> tuple[float, float]:
     >>> hough_steps(HoughLinesParams(rho=2.0, theta_deg=90.0))
     (2.0, 1.5707963267948966)
     """
-    p = HoughLinesParams() if params is None else params
-    if not isinstance(p, HoughLinesParams):
-        raise InputError(f"`params` must be a HoughLinesParams (the hough.lines section), got {type(p).__name__}")
+    p = section_or_default(params, HoughLinesParams, "hough.lines")
     return p.rho, math.radians(p.theta_deg)
 
 

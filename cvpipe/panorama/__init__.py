@@ -28,22 +28,25 @@ from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomog
 from .blend import (BLENDERS, DEFAULT_GAIN, DEFAULT_GAIN_BLOCK, GAIN_CHOICES, apply_gains, blend_feather,
                     blend_multiband, blend_set, compensation_gains, compose, gain_compensation, overlap_difference)
 from .crop import largest_rectangle
-from .features import (detect_all, normalize_det, rescale_homographies, resize, resize_matrix, resized_size,
-                       scale_for, working_images)
-from .match import Edge, MatchGraph, candidate_pairs, match_graph, match_set, prefilter_counts, refit
-from .opencv_baseline import OPENCV_STATUS, opencv_stitch
+from .features import (detect_all, features_of, normalize_det, rescale_homographies, resize, resize_matrix,
+                       resized_size, scale_for, working_images)
+from .match import (Edge, MatchGraph, candidate_pairs, match_graph, match_graph_with, match_set, prefilter_counts,
+                    refit)
+from .opencv_baseline import OPENCV_STATUS, opencv_stitch, opencv_stitch_with
 from .refine import levenberg_marquardt, nearest_rotation, refine_homographies, refine_rotations
-from .register import REFINEMENTS, Registration, estimate_focal, maximum_spanning_tree, register, register_set
+from .register import (REFINEMENTS, Registration, estimate_focal, maximum_spanning_tree, register, register_set,
+                       register_with)
 from .seams import seam_labels, seam_lines
 from .warp import PROJECTIONS, ComposeInputs, Warped, compose_inputs, warp_images, warp_set
 
 __all__ = ["BLENDERS", "DEFAULT_GAIN", "DEFAULT_GAIN_BLOCK", "GAIN_CHOICES", "apply_gains", "compensation_gains",
-           "OPENCV_STATUS", "PROJECTIONS", "REFINEMENTS", "ComposeInputs", "Edge", "MatchGraph",
-           "Panorama", "Registration", "Warped", "blend_feather", "blend_multiband", "blend_set", "candidate_pairs",
-           "compose", "compose_inputs", "detect_all", "estimate_focal", "gain_compensation", "largest_rectangle",
-           "levenberg_marquardt", "match_graph", "match_set", "maximum_spanning_tree", "nearest_rotation",
-           "normalize_det", "opencv_stitch", "overlap_difference", "prefilter_counts", "refine_homographies",
-           "refine_rotations", "refit", "register", "register_set", "rescale_homographies", "resize", "resize_matrix",
+           "OPENCV_STATUS", "PROJECTIONS", "REFINEMENTS", "ComposeInputs", "Edge", "MatchGraph", "Panorama",
+           "Registration", "Warped", "blend_feather", "blend_multiband", "blend_set", "candidate_pairs",
+           "compose", "compose_inputs", "detect_all", "estimate_focal", "features_of", "gain_compensation",
+           "largest_rectangle", "levenberg_marquardt", "match_graph", "match_graph_with", "match_set",
+           "maximum_spanning_tree", "nearest_rotation", "normalize_det", "opencv_stitch", "opencv_stitch_with",
+           "overlap_difference", "prefilter_counts", "refine_homographies", "refine_rotations", "refit",
+           "register", "register_set", "register_with", "rescale_homographies", "resize", "resize_matrix",
            "resized_size", "scale_for", "seam_labels", "seam_lines", "stitch", "warp_images", "warp_set",
            "working_images"]
 
@@ -142,17 +145,13 @@ def stitch(images: Sequence[np.ndarray], features: PanoramaFeaturesParams = Pano
     rng = np.random.default_rng(rng)
     t = {}
     t0 = time.perf_counter()
-    grays, work_sizes = working_images(images, features.work_megapix)
-    feats = detect_all(grays, features.detector, features.max_features)
+    work_sizes, feats = features_of(images, features)
     t["features"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    graph = match_graph(feats, work_sizes, ratio=matching.ratio, ransac_threshold=matching.ransac_threshold,
-                        min_inliers=matching.min_inliers, min_confidence=matching.min_confidence,
-                        candidates=matching.candidates, refit_threshold=matching.refit_threshold, rng=rng)
+    graph = match_graph_with(feats, work_sizes, matching, rng)
     t["match"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    reg = register(graph, refine=homographies.refine, max_points_per_pair=homographies.max_points_per_pair,
-                   rng=rng, ids=ids)
+    reg = register_with(graph, homographies, rng, ids=ids)
     t["homographies"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     comp = compose_inputs(images, reg, work_sizes, warp.compose_megapix)

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import EstimationError
 from ..features import Features, detect
+from ..params import PanoramaFeaturesParams, section_or_default
 
 
 def scale_for(size: tuple[int, int], megapix: float) -> float:
@@ -101,3 +102,37 @@ def detect_all(grays: Sequence[np.ndarray], detector: str, max_features: int) ->
     """:func:`cvpipe.features.detect` on every image (in threads: OpenCV releases the GIL)."""
     with ThreadPoolExecutor(_workers()) as pool:
         return list(pool.map(lambda g: detect(g, detector, max_features), grays))
+
+
+def features_of(images: Sequence[np.ndarray], params: PanoramaFeaturesParams | None = None,
+                ) -> tuple[list[tuple[int, int]], list[Features]]:
+    """The features of a set at the registration resolution, with the ``panorama.features`` section: the images
+    shrunk to ``work_megapix`` (:func:`working_images`), then ``detector`` with ``max_features`` on each
+    (:func:`detect_all`). The step of :func:`cvpipe.panorama.stitch` and of the ``panorama_features`` stage.
+
+    Parameters
+    ----------
+    images : sequence of (H, W) or (H, W, 3) uint8
+        Grayscale or BGR photos.
+    params : PanoramaFeaturesParams or None
+        The ``panorama.features`` section (None: its defaults).
+
+    Returns
+    -------
+    (work sizes, features)
+        Each image's ``(w, h)`` at the registration resolution and its :class:`~cvpipe.features.Features` there.
+
+    Examples
+    --------
+    >>> from cvpipe.params import PanoramaFeaturesParams
+    >>> from cvpipe.samples import photo
+    >>> img = photo("astronaut")
+    >>> sizes, feats = features_of([img, img[:, :256]], PanoramaFeaturesParams(work_megapix=0.1, max_features=300))
+    >>> sizes  # each image shrunk to 0.1 MP: 512 x 512 and 256 x 512 keep their proportions
+    [(316, 316), (224, 447)]
+    >>> [len(f.xy) <= 300 for f in feats]
+    [True, True]
+    """
+    p = section_or_default(params, PanoramaFeaturesParams, "panorama.features")
+    grays, sizes = working_images(images, p.work_megapix)
+    return sizes, detect_all(grays, p.detector, p.max_features)

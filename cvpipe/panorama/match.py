@@ -18,6 +18,7 @@ from ..errors import EstimationError
 from ..features import Features
 from ..homography import find_homography
 from ..matching import MatchIndex, nearest_two, ratio_matches
+from ..params import PanoramaMatchParams, section_or_default
 from .features import _workers
 
 
@@ -326,6 +327,44 @@ def _components(n: int, edges) -> list[list[int]]:
     return list(groups.values())
 
 
+def match_graph_with(feats: Sequence[Features], sizes: Sequence[tuple[int, int]],
+                     params: PanoramaMatchParams | None, rng) -> MatchGraph:
+    """:func:`match_graph` with the ``panorama.match`` section (``ratio``, ``ransac_threshold``, ``min_inliers``,
+    ``min_confidence``, ``candidates``, ``refit_threshold``): the step of :func:`cvpipe.panorama.stitch` and of the
+    ``panorama_match`` stage.
+
+    Parameters
+    ----------
+    feats : sequence of Features
+        Each image's features at the registration resolution.
+    sizes : sequence of (w, h)
+        The images' sizes at that resolution.
+    params : PanoramaMatchParams or None
+        The ``panorama.match`` section (None: its defaults).
+    rng : seed or Generator
+        For RANSAC (the stage passes the section's ``seed``; ``stitch`` its own generator).
+
+    Returns
+    -------
+    MatchGraph
+
+    Examples
+    --------
+    >>> from cvpipe.panorama import features_of
+    >>> from cvpipe.params import PanoramaMatchParams
+    >>> from cvpipe.samples import photo
+    >>> img = photo("astronaut")
+    >>> sizes, feats = features_of([img[:, 200:], img[:, :320]])
+    >>> graph = match_graph_with(feats, sizes, PanoramaMatchParams(), 0)
+    >>> list(graph.edges)  # the two crops overlap by 120 columns
+    [(0, 1)]
+    """
+    p = section_or_default(params, PanoramaMatchParams, "panorama.match")
+    return match_graph(feats, sizes, ratio=p.ratio, ransac_threshold=p.ransac_threshold, min_inliers=p.min_inliers,
+                       min_confidence=p.min_confidence, candidates=p.candidates, refit_threshold=p.refit_threshold,
+                       rng=rng)
+
+
 def match_set(item: tuple, p) -> tuple[MatchGraph, float]:
     """The match graph of one set: the per-set work of the ``panorama_match`` stage, an item of
     :func:`cvpipe.compute.map_items` (it may run on another machine: data in, data out).
@@ -335,8 +374,7 @@ def match_set(item: tuple, p) -> tuple[MatchGraph, float]:
     item : tuple
         ``(features, work sizes)``: each image's :class:`~cvpipe.features.Features` and ``(w, h)``.
     p : PanoramaMatchParams
-        ``ratio``, ``ransac_threshold``, ``min_inliers``, ``min_confidence``, ``candidates``, ``refit_threshold``,
-        ``seed``.
+        The ``panorama.match`` section (:func:`match_graph_with`; its ``seed`` seeds RANSAC).
 
     Returns
     -------
@@ -347,7 +385,5 @@ def match_set(item: tuple, p) -> tuple[MatchGraph, float]:
 
     feats, sizes = item
     t0 = time.perf_counter()
-    graph = match_graph(feats, sizes, ratio=p.ratio, ransac_threshold=p.ransac_threshold, min_inliers=p.min_inliers,
-                        min_confidence=p.min_confidence, candidates=p.candidates, refit_threshold=p.refit_threshold,
-                        rng=p.seed)
+    graph = match_graph_with(feats, sizes, p, p.seed)
     return graph, time.perf_counter() - t0

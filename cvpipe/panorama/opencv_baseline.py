@@ -7,6 +7,8 @@ from typing import Sequence
 import cv2
 import numpy as np
 
+from ..params import PanoramaFeaturesParams, PanoramaMatchParams, PanoramaWarpParams, section_or_default
+
 #: cv2.Stitcher status codes -> names
 OPENCV_STATUS = {0: "OK", 1: "ERR_NEED_MORE_IMGS", 2: "ERR_HOMOGRAPHY_EST_FAIL", 3: "ERR_CAMERA_PARAMS_ADJUST_FAIL"}
 
@@ -32,3 +34,25 @@ def opencv_stitch(images: Sequence[np.ndarray], work_megapix: float, compose_meg
     if code != 0:
         return OPENCV_STATUS.get(int(code), f"ERR_{int(code)}"), None, []
     return "OK", pano, [int(k) for k in np.asarray(st.component()).ravel()]
+
+
+def opencv_stitch_with(images: Sequence[np.ndarray], features: PanoramaFeaturesParams | None,
+                       matching: PanoramaMatchParams | None, warp: PanoramaWarpParams | None,
+                       ) -> tuple[str, np.ndarray | None, list[int]]:
+    """:func:`opencv_stitch` with our sections' settings: ``panorama.features.work_megapix``,
+    ``panorama.warp.compose_megapix`` and ``panorama.match.min_confidence`` (the ``panorama_opencv_stitcher``
+    stage's entry point; None: a section's defaults).
+
+    Examples
+    --------
+    >>> from cvpipe.params import PanoramaFeaturesParams
+    >>> from cvpipe.samples import photo
+    >>> img = photo("astronaut")
+    >>> status, pano, used = opencv_stitch_with([img[:, 200:], img[:, :320]], PanoramaFeaturesParams(), None, None)
+    >>> status, sorted(used), pano.shape[1] > 480
+    ('OK', [0, 1], True)
+    """
+    f = section_or_default(features, PanoramaFeaturesParams, "panorama.features")
+    m = section_or_default(matching, PanoramaMatchParams, "panorama.match")
+    w = section_or_default(warp, PanoramaWarpParams, "panorama.warp")
+    return opencv_stitch(images, f.work_megapix, w.compose_megapix, m.min_confidence)

@@ -15,6 +15,7 @@ from typing import Sequence
 import numpy as np
 
 from ..errors import EstimationError
+from ..params import PanoramaHomographiesParams, PanoramaMatchParams, section_or_default
 from .features import normalize_det
 from .match import MatchGraph, _components
 from .refine import _transfer_rms, refine_homographies, refine_rotations
@@ -276,6 +277,40 @@ def register(graph: MatchGraph, *, refine: str, max_points_per_pair: int, rng=No
     return Registration(tuple(sorted(main)), dropped, ref, G, tuple(tree), float(focal), rms0, rms1, model)
 
 
+def register_with(graph: MatchGraph, params: PanoramaHomographiesParams | None, rng,
+                  ids: Sequence[int | str] | None = None) -> Registration:
+    """:func:`register` with the ``panorama.homographies`` section (``refine``, ``max_points_per_pair``): the step
+    of :func:`cvpipe.panorama.stitch` and of the ``panorama_homographies`` stage.
+
+    Parameters
+    ----------
+    graph : MatchGraph
+    params : PanoramaHomographiesParams or None
+        The section (None: its defaults).
+    rng : seed or Generator
+        For the refinement's point subsets (the stage passes ``panorama.match.seed``).
+    ids : sequence of int or str, optional
+        How messages name the images, as :func:`register`.
+
+    Returns
+    -------
+    Registration
+
+    Examples
+    --------
+    >>> from cvpipe.panorama import features_of, match_graph_with
+    >>> from cvpipe.params import PanoramaHomographiesParams
+    >>> from cvpipe.samples import photo
+    >>> img = photo("astronaut")
+    >>> sizes, feats = features_of([img[:, 200:], img[:, :320]])
+    >>> reg = register_with(match_graph_with(feats, sizes, None, 0), PanoramaHomographiesParams(refine="none"), 0)
+    >>> reg.used
+    (0, 1)
+    """
+    p = section_or_default(params, PanoramaHomographiesParams, "panorama.homographies")
+    return register(graph, refine=p.refine, max_points_per_pair=p.max_points_per_pair, rng=rng, ids=ids)
+
+
 def register_set(item: tuple, shared: tuple) -> tuple[Registration, float]:
     """Register one set from its match graph: the per-set work of the ``panorama_homographies`` stage, an item of
     :func:`cvpipe.compute.map_items` (it may run on another machine: data in, data out).
@@ -285,7 +320,8 @@ def register_set(item: tuple, shared: tuple) -> tuple[Registration, float]:
     item : tuple
         ``(MatchGraph, file names)``.
     shared : tuple
-        ``(refine, max_points_per_pair, seed)`` as :func:`register` takes them.
+        ``(PanoramaHomographiesParams, PanoramaMatchParams)``: the ``panorama.homographies`` section
+        (:func:`register_with`) and the ``panorama.match`` section, whose ``seed`` seeds the refinement.
 
     Returns
     -------
@@ -300,7 +336,8 @@ def register_set(item: tuple, shared: tuple) -> tuple[Registration, float]:
     import time
 
     graph, files = item
-    refine, max_points, seed = shared
+    params, match = shared
+    match = section_or_default(match, PanoramaMatchParams, "panorama.match")
     t0 = time.perf_counter()
-    reg = register(graph, refine=refine, max_points_per_pair=max_points, rng=seed, ids=files)
+    reg = register_with(graph, params, match.seed, ids=files)
     return reg, time.perf_counter() - t0

@@ -35,7 +35,8 @@ from pydantic import Field, field_validator
 from pydantic_core import PydanticCustomError
 
 # the machinery, re-exported: `from cvpipe.params import Section, from_mapping, load_section` keeps working
-from .base import Bound, Section, from_mapping, load_section, read_params_file, replace  # noqa: F401
+from .base import (Bound, Section, from_mapping, load_section, read_params_file, replace,  # noqa: F401
+                   section_or_default)
 
 #: the feature detectors of :data:`cvpipe.features.DETECTORS` (a test keeps the two equal)
 Detector = Literal["sift", "orb", "brisk", "akaze"]

@@ -93,6 +93,32 @@ def replace(obj: T, /, **changes: Any) -> T:
     return dataclasses.replace(obj, **changes)
 
 
+def section_or_default(params: Any, cls: type[T], section: str) -> T:
+    """``params`` when it is a ``cls`` (the ``section`` of ``params.yaml``), ``cls()`` when it is None: the type check
+    of every entry point that takes a section.
+
+    Raises
+    ------
+    InputError
+        ``params`` is neither None nor a ``cls``; the one-line message names ``params``.
+
+    Examples
+    --------
+    >>> from cvpipe.params import MatchParams
+    >>> section_or_default(None, MatchParams, "homography.match").ratio
+    0.8
+    >>> section_or_default({"ratio": 0.7}, MatchParams, "homography.match")
+    Traceback (most recent call last):
+    ...
+    cvpipe.errors.InputError: `params` must be a MatchParams (the homography.match section), got dict
+    """
+    if params is None:
+        return cls()
+    if not isinstance(params, cls):
+        raise InputError(f"`params` must be a {cls.__name__} (the {section} section), got {type(params).__name__}")
+    return params
+
+
 def _range(info: Any, bound: Bound | None = None, limit: Any = None) -> str:
     """``"[0, 1.0]"``, ``"(0.0, inf]"``... from a field's ``Field`` limits, ``bound`` (set to ``limit``) replacing the
     side it sets."""

@@ -9,7 +9,7 @@
 - :mod:`~cvpipe.stereo.sgm`: our semi-global matching (``disparity_sgm``, ``fill_invalid``), whose numba kernels
   are in :mod:`~cvpipe.stereo._kernels`;
 - :mod:`~cvpipe.stereo.opencv_baseline`: OpenCV's block matching and SGBM, and the method registry
-  (``METHODS``, ``compute_disparity``);
+  (``METHODS``, ``compute_disparity``; ``disparity_with`` with the ``stereo.<method>`` section, ``METHOD_SECTIONS``);
 - :mod:`~cvpipe.stereo.depth`: depth from disparity, the point cloud and its PLY bytes, colour-mapped pictures;
 - :mod:`~cvpipe.stereo.report`: accuracy against the truth, the stages' metrics, pictures and report summary.
 
@@ -30,7 +30,8 @@ True
 from .calibration import Calibration, parse_calibration, parse_middlebury_calib, parse_opencv_calib
 from .depth import colorize, depth_from_disparity, parse_ply, ply_bytes, point_cloud
 from .epipolar import FundamentalFit, eight_point, epipoles, find_fundamental, sampson_distance, seven_point
-from .opencv_baseline import METHODS, SGBM_MODES, compute_disparity, disparity_opencv_bm, disparity_opencv_sgbm
+from .opencv_baseline import (METHOD_SECTIONS, METHODS, SGBM_MODES, compute_disparity, disparity_opencv_bm,
+                              disparity_opencv_sgbm, disparity_with)
 from .pipeline import KINDS, RectifiedPair, disparity_item, feature_matches, rectify_item, rectify_pair
 from .rectify import (DepthGeometry, Rectification, distortion, looks_rectified, max_disp_from_matches,
                       opencv_uncalibrated, rectified_depth_geometry, rectify_calibrated, rectify_uncalibrated,
@@ -43,7 +44,8 @@ from .sgm import disparity_sgm, fill_invalid
 
 __all__ = [
     "disparity_sgm", "fill_invalid",
-    "METHODS", "SGBM_MODES", "compute_disparity", "disparity_opencv_bm", "disparity_opencv_sgbm",
+    "METHODS", "METHOD_SECTIONS", "SGBM_MODES", "compute_disparity", "disparity_with", "disparity_opencv_bm",
+    "disparity_opencv_sgbm",
     "FundamentalFit", "eight_point", "seven_point", "sampson_distance", "epipoles", "find_fundamental",
     "Calibration", "parse_calibration", "parse_middlebury_calib", "parse_opencv_calib",
     "DepthGeometry", "Rectification", "distortion", "robust_disparity_range", "rectifying_homographies",

@@ -200,7 +200,8 @@ def disparity_item(item: tuple, shared: tuple) -> tuple[np.ndarray, dict[str, fl
     item : tuple
         ``(left, right, max_disp)``: the rectified images and the pair's disparity range.
     shared : tuple
-        ``(method, options)``: a key of :data:`cvpipe.stereo.METHODS` and its keyword options.
+        ``(method, section)``: a key of :data:`cvpipe.stereo.METHODS` and its ``stereo.<method>`` section
+        (:func:`~cvpipe.stereo.opencv_baseline.disparity_with`).
 
     Returns
     -------
@@ -216,19 +217,19 @@ def disparity_item(item: tuple, shared: tuple) -> tuple[np.ndarray, dict[str, fl
     """
     import time
 
-    from .opencv_baseline import compute_disparity
+    from .opencv_baseline import disparity_with
 
     left, right, max_disp = item
-    method, options = shared
+    method, params = shared
     seconds = {}
     try:
         if method not in _warm:
             t0 = time.perf_counter()
-            compute_disparity(left[:WARMUP_ROWS], right[:WARMUP_ROWS], max_disp, method, **options)
+            disparity_with(left[:WARMUP_ROWS], right[:WARMUP_ROWS], max_disp, params, method)
             seconds["warmup"] = time.perf_counter() - t0
             _warm.add(method)
         t0 = time.perf_counter()
-        disp = compute_disparity(left, right, max_disp, method, **options)
+        disp = disparity_with(left, right, max_disp, params, method)
     except InputError:
         raise
     except ValueError as exc:
