@@ -66,10 +66,18 @@ def progress(items: Iterable[T], desc: str, total: int | None = None) -> Iterabl
 
 @contextlib.contextmanager
 def step(name: str) -> Iterator[None]:
-    """Log ``name`` and its wall time at INFO level (shown with ``-v``)."""
+    """Log ``name`` and its wall time at INFO level (shown with ``-v``).
+
+    A Ctrl-C that a library swallowed during the step (:func:`cvpipe._entry.seen`) is raised at its end, before the
+    command writes or prints anything from a step that may be incomplete.
+    """
+    from .. import _entry
+
     t0 = time.perf_counter()
     yield
     log.info("%s: %.3f s", name, time.perf_counter() - t0)
+    if _entry.seen():
+        raise KeyboardInterrupt
 
 
 def note(message: str) -> None:
