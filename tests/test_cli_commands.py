@@ -123,6 +123,30 @@ def test_cold_numba_cache_is_announced_once(workdir, tmp_path):
     assert quiet.returncode == 0 and quiet.stderr == ""
 
 
+@pytest.mark.parametrize("argv", [
+    ["hough", "{bad}"], ["homography", "{bad}", "{good}"], ["homography", "{good}", "{bad}"],
+    ["logo", "{bad}", "--gallery", "{gallery}"], ["inspect", "{good}", "{bad}"], ["inspect", "{bad}", "{good}"],
+    ["stitch", "{bad}", "{good}", "-o", "{tmp}/p.png"], ["stereo", "{good}", "{bad}", "--max-disp", "16", "-o",
+                                                        "{tmp}/d.npy"]], ids=lambda a: " ".join(a[:3]))
+def test_a_bad_image_fails_before_the_compile_note(argv, workdir, tmp_path):
+    """With a cold numba cache, a missing or corrupt input is the one line on stderr: no "compiling ... once"
+    first, for work that will not happen."""
+    good = workdir / "data" / "samples" / "hough" / "synthetic_grid.png"
+    bad = tmp_path / "corrupt.png"
+    bad.write_bytes(b"\x89PNG\r\n\x1a\n not really")
+    words = [w.format(bad=bad, good=good, tmp=tmp_path, gallery=workdir / "data" / "samples" / "logo" / "gallery")
+             for w in argv]
+    env = dict(_env(), NUMBA_CACHE_DIR=str(tmp_path / "cold"))
+    proc = subprocess.run([sys.executable, "-m", "cvpipe", *words], capture_output=True, text=True, env=env, cwd=ROOT)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2, proc.stderr
+    assert len(lines) == 1 and lines[0].startswith("cvpipe: error:") and "corrupt.png" in lines[0], proc.stderr
+    missing = [w.replace(str(bad), str(tmp_path / "missing.png")) for w in words]
+    proc = subprocess.run([sys.executable, "-m", "cvpipe", *missing], capture_output=True, text=True, env=env,
+                          cwd=ROOT)
+    assert proc.returncode == 2 and "compiling" not in proc.stderr, proc.stderr
+
+
 def test_every_numba_kernel_is_cached_on_disk():
     """A kernel without cache=True would recompile in every process: the warm start-up depends on all of them."""
     import importlib
