@@ -28,7 +28,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--out", required=True, metavar="PANO.png", help="where to write the panorama")
     add_param_options(parser, _W, {"projection": "panorama surface"})
     add_param_options(parser, _B, {"blender": "blending",
-})
+                                   "gain_compensation": "exposure compensation between the photos: one gain per "
+                                                        "photo, per colour channel, per block of --gain-block px, "
+                                                        "or both (OpenCV's compensators)",
+                                   "gain_block": "block size in pixels of the block compensators"})
     add_feature_arguments(parser, _F.detector, _F.max_features, _M.ratio)
     add_param_options(parser, _M, {"min_inliers": "RANSAC inliers a pair of photos needs",
                                    "min_confidence": "pair confidence inliers / (8 + 0.3 matches) needed"})
@@ -97,9 +100,10 @@ def run(args: argparse.Namespace) -> int:
             homographies=replace(_H, refine=args.refine),
             warp=replace(_W, projection=args.projection,
                          compose_megapix=_compose_within_budget(images, args.compose_megapix)),
-            blend=replace(_B, blender=args.blender))
+            blend=replace(_B, blender=args.blender, gain_compensation=args.gain_compensation,
+                          gain_block=args.gain_block))
     except ValueError as exc:
-        raise InputError(with_flags(str(exc), _HINTED + ("ratio", "compose_megapix"))) from exc
+        raise InputError(with_flags(str(exc), _HINTED + ("ratio", "compose_megapix", "gain_block"))) from exc
     compile_note("panorama", homography, linalg, _kernels)
     try:
         with step(f"stitch {len(images)} images"):
