@@ -473,7 +473,10 @@ def test_stitch_gain_compensation_flag(cast_pair, tmp_path, capsys):
     cast = {}
     for mode in ("none", "channels"):
         out = tmp_path / f"{mode}.png"
-        assert cli.main(["stitch", *paths, "-o", str(out), "--gain-compensation", mode]) == 0
+        assert cli.main(["-v", "stitch", *paths, "-o", str(out), "--gain-compensation", mode]) == 0
+        err = capsys.readouterr().err
+        # -v: the library's steps, each with its time
+        assert all(re.search(rf"{s}: \d+\.\d+ s", err) for s in ("features", "match", "warp", "blend")), err
         cast[mode] = _blue_cast(cv2.imread(str(out)), photo)
     # the x0.7 cast shows uncompensated (> 0.2 of the 0.3); per-channel gains remove a good part of it but not all:
     # the gains' prior (OpenCV's sigma_g = 0.1) keeps each one near 1, against the 1.43 a full correction needs

@@ -9,7 +9,7 @@ from pathlib import Path
 from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
                       PanoramaWarpParams, replace)
 from . import (DETECTORS, add_feature_arguments, add_param_options, add_result_arguments,  # noqa: F401
-               compile_note, progress, step, with_flags)
+               compile_note, log, progress, step, with_flags)
 
 HELP = "stitch overlapping photos (any order) into one seamless, cropped panorama"
 EXAMPLE = "cvpipe stitch data/samples/panorama/coffee/*.jpg -o pano.png --projection plane --json"
@@ -111,6 +111,8 @@ def run(args: argparse.Namespace) -> int:
                            ids=[args.images[k] for k in positions])  # messages name the files
     except EstimationError as exc:
         raise EstimationError(with_flags(str(exc), _HINTED)) from exc
+    for name, seconds in pano.timings.items():  # the library's own step timings, shown with -v
+        log.info("  %s: %.3f s", name, seconds)
     io.save_image(args.out, pano.image)
     reg = pano.registration
     for k, why in reg.dropped:
