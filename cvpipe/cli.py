@@ -36,6 +36,7 @@ COMMANDS = {
     "homography": "homography",
     "stereo": "stereo",
     "stitch": "stitch",
+    "panorama": "stitch",  # the task's name (params.yaml, dvc.yaml, outputs): an alias of `stitch`
     "bench": "bench",
 }
 

@@ -26,7 +26,8 @@ from cvpipe import cli, io, samples
 from cvpipe.params import SamplesParams
 
 ROOT = Path(__file__).resolve().parents[1]
-COMMANDS = [name for name in cli.COMMANDS if name != "bench" and name != "defect"]  # `defect`: inspect's alias
+# `defect` and `panorama` (the task names) are aliases of `inspect` and `stitch`
+COMMANDS = [name for name, module in cli.COMMANDS.items() if name != "bench" and module == name]
 
 
 def _env() -> dict:
@@ -492,3 +493,16 @@ def test_stitch_bad_gain_compensation_is_one_line_naming_the_flag(cast_pair, tmp
         assert len(lines) == 1 and lines[0].startswith("cvpipe: error:") and bad[0] in lines[0], lines
     assert not (tmp_path / "p.png").exists()
 
+
+def test_panorama_is_an_alias_of_stitch(cast_pair, tmp_path, capsys):
+    """The task's name (params.yaml, dvc.yaml) runs the same command, and the top-level help lists it."""
+    paths, _ = cast_pair
+    with pytest.raises(SystemExit):
+        cli.main(["--help"])
+    assert re.search(r"^ +panorama +\S", capsys.readouterr().out, re.M)
+    docs = [_run_json([name, *paths, "-o", str(tmp_path / f"{name}.png"), "--json"], capsys)
+            for name in ("stitch", "panorama")]
+    for d in docs:
+        del d["out"]
+    assert docs[0] == docs[1]
+    assert np.array_equal(cv2.imread(str(tmp_path / "stitch.png")), cv2.imread(str(tmp_path / "panorama.png")))
