@@ -60,12 +60,18 @@ def main() -> int:
     """Run ``cvpipe`` with the arguments of ``sys.argv``; returns its exit status (130 on any interrupt)."""
     json_mode = "--json" in sys.argv[1:]
     # not when SIGINT is ignored (a background job, nohup): the program must stay as deaf to it as it was started
-    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+    handled = signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    if handled:
         signal.signal(signal.SIGINT, _on_sigint)
     try:
         from . import cli
 
         code = cli.main()
+        if handled:
+            # the command is done. Python puts SIGINT back to its default action when it shuts down (not when it is
+            # ignored), so a Ctrl-C during the shutdown (numba's threads, atexit) killed the process (-2) or
+            # crashed it (-11) instead of letting it end with the command's status
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
     except KeyboardInterrupt:
         exit_interrupted(json_mode)
     if _seen:  # swallowed on its way out: the command's output may be incomplete
