@@ -36,6 +36,7 @@ COMMANDS = {
     "homography": "homography",
     "stereo": "stereo",
     "stitch": "stitch",
+    "panorama": "stitch",  # the task's name (params.yaml, dvc.yaml, outputs): an alias of `stitch`
     "bench": "bench",
 }
 
@@ -214,15 +215,23 @@ def _unraisable(hook):
     """A ``sys.unraisablehook`` that turns a Ctrl-C swallowed in a C callback into a real interrupt.
 
     numba's cache and LLVM callbacks run Python code from C; a KeyboardInterrupt raised there cannot propagate
-    and Python would print its traceback and carry on. Re-raising the signal delivers the interrupt again at the
-    next point where Python can raise it, so the command stops with exit 130 and one line.
+    and Python would print its traceback and carry on. Raising it again inside this hook would only be reported
+    as "Exception ignored in sys.unraisablehook", so the interrupt is recorded (:func:`cvpipe._entry.mark`) and
+    delivered again a moment later from a helper thread, when the main thread is back in ordinary Python code: the
+    command stops with exit 130 and one line.
     """
 
     def on_unraisable(info):
         if info.exc_type is not None and issubclass(info.exc_type, KeyboardInterrupt):
-            import signal
+            import _thread
+            import threading
 
-            signal.raise_signal(signal.SIGINT)
+            from . import _entry
+
+            _entry.mark()
+            timer = threading.Timer(0.01, _thread.interrupt_main)
+            timer.daemon = True
+            timer.start()
             return
         hook(info)
 
@@ -307,5 +316,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.unraisablehook = unraisable
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+if __name__ == "__main__":  # ``python -m cvpipe.cli``: the program, with its Ctrl-C handling
+    from cvpipe._entry import main as _program
+
+    sys.exit(_program())

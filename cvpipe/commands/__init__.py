@@ -66,10 +66,18 @@ def progress(items: Iterable[T], desc: str, total: int | None = None) -> Iterabl
 
 @contextlib.contextmanager
 def step(name: str) -> Iterator[None]:
-    """Log ``name`` and its wall time at INFO level (shown with ``-v``)."""
+    """Log ``name`` and its wall time at INFO level (shown with ``-v``).
+
+    A Ctrl-C that a library swallowed during the step (:func:`cvpipe._entry.seen`) is raised at its end, before the
+    command writes or prints anything from a step that may be incomplete.
+    """
+    from .. import _entry
+
     t0 = time.perf_counter()
     yield
     log.info("%s: %.3f s", name, time.perf_counter() - t0)
+    if _entry.seen():
+        raise KeyboardInterrupt
 
 
 def note(message: str) -> None:
@@ -127,6 +135,69 @@ def compile_note(task: str, *modules) -> None:
             seconds += COMPILE_SECONDS.get(module.__name__, 5)
     if seconds:
         note(f"compiling the {task} kernels once, about {seconds:.0f} s (cached for the next runs)")
+
+
+#: detector choices of every command: the keys of ``cvpipe.features.DETECTORS`` (a test keeps them equal)
+DETECTORS = ("akaze", "brisk", "orb", "sift")
+
+
+def add_feature_arguments(parser, detector: str, max_features: int, ratio: float, flag: str = "--detector") -> None:
+    """``--detector`` (or ``flag``), ``--max-features`` and ``--ratio``, with the defaults of the command's
+    parameter sections."""
+    parser.add_argument(flag, dest=flag.lstrip("-").replace("-", "_"), type=str.lower, choices=DETECTORS,
+                        default=detector, help=f"keypoint detector (default {detector})")
+    parser.add_argument("--max-features", type=int, default=max_features,
+                        help=f"keypoints per image (default {max_features})")
+    parser.add_argument("--ratio", type=float, default=ratio, help=f"Lowe's ratio test (default {ratio})")
+
+
+def add_param_options(parser, section, helps: dict[str, str]) -> None:
+    """One ``--field-name`` option per ``helps`` entry, declared by the field of the parameter ``section`` (a
+    :class:`cvpipe.params.Section` instance): its default, its type and, for a ``Literal`` field, its choices, which
+    ``--help`` lists. The help text gets ``(default X)`` appended."""
+    import typing
+
+    for name, text in helps.items():
+        default = getattr(section, name)
+        annotation = type(section).model_fields[name].annotation
+        choices = typing.get_args(annotation) if typing.get_origin(annotation) is typing.Literal else None
+        shown = f"{default:g}" if isinstance(default, float) else default
+        parser.add_argument("--" + name.replace("_", "-"), type=type(default), choices=choices, default=default,
+                            help=f"{text} (default {shown})")
+
+
+def add_result_arguments(parser, overlay: str, json: str, items: str | None = None, suffix: str = "") -> None:
+    """``--overlay PNG``, ``--json`` and, for a command that runs several ``items`` (a plural noun) one by one,
+    ``--scheduler ADDR``; its pictures go to a folder, one ``<item stem><suffix>.png`` each (:func:`overlay_paths`)."""
+    if items:
+        overlay += f"; with several {items}, PNG is a folder (<{items[:-1]}>{suffix}.png)"
+    parser.add_argument("--overlay", metavar="PNG", help=overlay)
+    parser.add_argument("--json", action="store_true", help=json)
+    if items:
+        parser.add_argument("--scheduler", default="", metavar="ADDR",
+                            help=f"run the {items} on Dask: 'local' or a scheduler address tcp://host:port "
+                                 "(default: in process)")
+
+
+def read_images(paths: Iterable[str], mode: str, named: bool = False, first_read=None) -> Iterator[tuple]:
+    """``(image or None, read error or None)`` per path (``(path, image, error)`` when ``named``), lazily: the
+    image travels with its task and a read error fails only its own item.
+
+    ``first_read`` is called once, just before the first image that could be read is yielded: a note about work to
+    come (numba compiling) is not printed when every input is bad, and never before the error of a bad input.
+    """
+    from .. import io
+    from ..errors import CvpipeError
+
+    for path in paths:
+        try:
+            item: tuple = (io.read_image(path, mode), None)
+        except CvpipeError as exc:
+            item = (None, exc)
+        if item[1] is None and first_read is not None:
+            first_read, announce = None, first_read
+            announce()
+        yield (path, *item) if named else item
 
 
 def overlay_paths(inputs: list[str], overlay: str | None, suffix: str) -> list[str | None]:

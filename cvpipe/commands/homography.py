@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 
 from ..params import FeaturesParams, HomographyEstimateParams, MatchParams
-from . import compile_note, step
+from . import (DETECTORS, add_feature_arguments, add_param_options, add_result_arguments,  # noqa: F401
+               compile_note, step)  # DETECTORS: the --detector choices (a test keeps them equal)
 
 HELP = "estimate the homography mapping image A to image B (ours or OpenCV's RANSAC/MAGSAC)"
 EXAMPLE = ("cvpipe homography data/samples/homography/0_astronaut_a.jpg data/samples/homography/0_astronaut_b.jpg "
@@ -13,8 +14,6 @@ EXAMPLE = ("cvpipe homography data/samples/homography/0_astronaut_a.jpg data/sam
 
 #: ``--method`` choices: the keys of ``cvpipe.homography.METHODS`` (params.yaml's spelling; a test keeps them equal)
 METHODS = ("ours", "opencv_ransac", "opencv_magsac")
-#: ``--detector`` choices: the keys of ``cvpipe.features.DETECTORS`` (a test keeps them equal)
-DETECTORS = ("akaze", "brisk", "orb", "sift")
 
 
 def method_name(text: str) -> str:
@@ -28,21 +27,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("b", help="image B")
     parser.add_argument("--method", type=method_name, choices=METHODS, default="ours",
                         help="estimator (default: ours; opencv-ransac etc. with a hyphen are accepted too)")
-    parser.add_argument("--detector", type=str.lower, choices=DETECTORS, default=f.detector,
-                        help=f"keypoint detector (default: {f.detector})")
-    parser.add_argument("--max-features", type=int, default=f.max_features,
-                        help=f"keypoints per image (default: {f.max_features})")
-    parser.add_argument("--ratio", type=float, default=m.ratio, help=f"Lowe's ratio test (default: {m.ratio})")
-    parser.add_argument("--threshold", type=float, default=e.threshold,
-                        help=f"inlier reprojection threshold in pixels of B (default: {e.threshold})")
-    parser.add_argument("--confidence", type=float, default=e.confidence,
-                        help=f"RANSAC confidence (default: {e.confidence})")
-    parser.add_argument("--max-iters", type=int, default=e.max_iters,
-                        help=f"RANSAC iterations at most (default: {e.max_iters})")
-    parser.add_argument("--seed", type=int, default=e.seed, help=f"random seed (default: {e.seed})")
-    parser.add_argument("--overlay", metavar="PNG",
-                        help="write B warped onto A as a checkerboard with A (straight edges across tiles = good H)")
-    parser.add_argument("--json", action="store_true", help='print {"H", "matches", "inliers", "overlay"} as JSON')
+    add_feature_arguments(parser, f.detector, f.max_features, m.ratio)
+    add_param_options(parser, e, {"threshold": "inlier reprojection threshold in pixels of B",
+                                  "confidence": "RANSAC confidence", "max_iters": "RANSAC iterations at most",
+                                  "seed": "random seed"})
+    add_result_arguments(parser, overlay="write B warped onto A as a checkerboard with A (straight edges across "
+                                         "tiles = good H)", json='print {"H", "matches", "inliers", "overlay"} as JSON')
 
 
 def run(args: argparse.Namespace) -> int:
@@ -55,11 +45,11 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"`--ratio` must be in (0, 1], got {args.ratio}")
     from .. import homography
 
-    if args.method == "ours":
-        compile_note("homography", homography)
     with step("read"):
         a = io.read_image(args.a, "gray")
         b = io.read_image(args.b, "gray")
+    if args.method == "ours":  # after the reads: a bad image fails first, without the note
+        compile_note("homography", homography)
     with step(f"features ({args.detector}) and matches"):
         src, dst = homography.correspondences(a, b, args.detector, args.max_features, args.ratio)
     if len(src) < 4:

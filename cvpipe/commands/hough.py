@@ -7,7 +7,7 @@ import math
 import sys
 
 from ..params import HoughEdgesParams, HoughLinesParams
-from . import compile_note, note, overlay_paths, progress, step
+from . import add_result_arguments, compile_note, note, overlay_paths, progress, read_images, step
 
 HELP = "find straight lines (standard Hough transform, cv2.HoughLines conventions)"
 EXAMPLE = "cvpipe hough data/samples/hough/synthetic_grid.png --threshold 100 --max-lines 10 --overlay lines.png"
@@ -16,6 +16,8 @@ EXAMPLE = "cvpipe hough data/samples/hough/synthetic_grid.png --threshold 100 --
 METHODS = ("ours", "opencv")
 #: lines printed by default: enough for any photo's main structure, few enough to read
 DEFAULT_MAX_LINES = 50
+#: ``--overlay`` with several images: ``<folder>/<image stem>_lines.png``
+SUFFIX = "_lines"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -35,14 +37,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-lines", type=int, default=DEFAULT_MAX_LINES, metavar="K",
                         help=f"report the K lines with most votes, 0 = all (default {DEFAULT_MAX_LINES})")
     parser.add_argument("--refine", action="store_true", help="sub-bin (rho, theta) for --method ours")
-    parser.add_argument("--overlay", metavar="PNG", help="write the image with the reported lines drawn on it; with "
-                                                         "several images PNG is a folder (<image>_lines.png)")
-    parser.add_argument("--json", action="store_true",
-                        help='print {"lines": [[rho, theta_rad, votes], ...] (cv2 convention), '
-                             '"lines_deg": [{"rho_px", "theta_deg", "votes"}, ...], "total", "overlay"}')
-    parser.add_argument("--scheduler", default="", metavar="ADDR",
-                        help="run the images on Dask: 'local' or a scheduler address tcp://host:port "
-                             "(default: in process)")
+    add_result_arguments(parser, "write the image with the reported lines drawn on it", items="images", suffix=SUFFIX,
+                         json='print {"lines": [[rho, theta_rad, votes], ...] (cv2 convention), '
+                              '"lines_deg": [{"rho_px", "theta_deg", "votes"}, ...], "total", "overlay"}')
 
 
 def method_of(args: argparse.Namespace) -> str:
@@ -54,26 +51,13 @@ def method_of(args: argparse.Namespace) -> str:
     return args.method or args.impl or "ours"
 
 
-def _read_images(paths: list[str]):
-    """``(gray image or None, read error or None)`` per path, lazily: the image travels with its task and a read
-    error fails only its own item."""
-    from .. import io
-    from ..errors import CvpipeError
-
-    for path in paths:
-        try:
-            yield io.read_image(path, "gray"), None
-        except CvpipeError as exc:
-            yield None, exc
-
-
 def image_lines(item: tuple, shared: tuple):
     """The (N, 3) lines of one image, an item of :func:`cvpipe.compute.map_items` (runs on a worker).
 
     Parameters
     ----------
     item : tuple
-        ``(gray image or None, read error or None)`` from :func:`_read_images`.
+        ``(gray image or None, read error or None)`` from :func:`cvpipe.commands.read_images`.
     shared : tuple
         ``(HoughEdgesParams, (canny low, high), method, rho, theta in radians, threshold, keyword arguments)``.
 
@@ -105,19 +89,23 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"`--theta-deg` must be > 0, got {args.theta_deg}")
     if args.max_lines < 0:
         raise InputError(f"`--max-lines` must be >= 0 (0 = all), got {args.max_lines}")
+    announce = None
     if method == "ours":
         # the serial or the parallel vote, whichever this run will use (hough_accumulator's own choice)
         from ..hough import _kernels, transform
 
         vote = _kernels._vote_parallel if transform._use_parallel(None) else _kernels._vote_serial
-        compile_note("hough", (_kernels, [_kernels._edge_points, vote, _kernels._peaks]))
+
+        def announce():  # once an image was read: a bad image fails first, without the note
+            compile_note("hough", (_kernels, [_kernels._edge_points, vote, _kernels._peaks]))
     scheduler = check_scheduler(args.scheduler, "--scheduler")
     kwargs = {"refine": True} if args.refine else {}
     shared = (HoughEdgesParams(), tuple(args.canny), method, args.rho, math.radians(args.theta_deg), args.threshold,
               kwargs)
-    pictures = overlay_paths(args.image, args.overlay, "_lines")
+    pictures = overlay_paths(args.image, args.overlay, SUFFIX)
     with step(f"lines ({method})"):
-        results = list(progress(map_items(image_lines, _read_images(args.image), shared=shared, scheduler=scheduler,
+        images = read_images(args.image, "gray", first_read=announce)
+        results = list(progress(map_items(image_lines, images, shared=shared, scheduler=scheduler,
                                           total=len(args.image)), "hough", total=len(args.image)))
     records, errors = [], []
     for path, res, picture in zip(args.image, results, pictures):

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..params import InspectParams, replace
-from . import compile_note, overlay_paths, progress, with_flags
+from . import DETECTORS, add_result_arguments, compile_note, overlay_paths, progress, read_images, with_flags
 
 if TYPE_CHECKING:
     from .. import defect as defects
@@ -19,8 +19,6 @@ EXAMPLE = "cvpipe inspect data/samples/defect/reference.png data/samples/defect/
 
 #: the defaults of ``cvpipe.defect.inspect``, without importing the algorithm package
 _DEFAULTS = InspectParams()
-#: ``--detector`` choices: the keys of ``cvpipe.features.DETECTORS`` (a test keeps them equal)
-DETECTORS = ("akaze", "brisk", "orb", "sift")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -39,15 +37,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"smallest defect kept, px (default {_DEFAULTS.regions.min_area})")
     parser.add_argument("--pad", type=float, default=_DEFAULTS.regions.pad,
                         help=f"pad the probe boxes by this many px (default {_DEFAULTS.regions.pad:g})")
-    parser.add_argument("--overlay", metavar="PNG",
-                        help="write the probe with its defect boxes; with several probes PNG is a folder "
-                             "(<probe>_regions.png)")
     parser.add_argument("--ecc-levels", type=int, default=_DEFAULTS.register.ecc_levels,
                         help=f"pyramid levels of the ECC refinement (default {_DEFAULTS.register.ecc_levels})")
-    parser.add_argument("--json", action="store_true", help="print the results as JSON on stdout")
-    parser.add_argument("--scheduler", default="", metavar="ADDR",
-                        help="run the probes on Dask: 'local' or a scheduler address tcp://host:port "
-                             "(default: in process)")
+    add_result_arguments(parser, "write the probe with its defect boxes", json="print the results as JSON on stdout",
+                         items="probes", suffix="_regions")
 
 
 def params_from_args(args: argparse.Namespace) -> InspectParams:
@@ -94,26 +87,13 @@ def overlay_stems(probes: list[str]) -> list[str]:
     return out
 
 
-def _read_probes(paths: list[str]):
-    """``(BGR probe or None, read error or None)`` per path, lazily: the image travels with its task and a read
-    error fails only its own item."""
-    from .. import io
-    from ..errors import CvpipeError
-
-    for path in paths:
-        try:
-            yield io.read_image(path, "color"), None
-        except CvpipeError as exc:
-            yield None, exc
-
-
 def inspect_probe(item: tuple, shared: tuple) -> defects.Inspection:
     """Inspect one probe, an item of :func:`cvpipe.compute.map_items` (runs on a worker).
 
     Parameters
     ----------
     item : tuple
-        ``(BGR probe or None, read error or None)`` from :func:`_read_probes`.
+        ``(BGR probe or None, read error or None)`` from :func:`cvpipe.commands.read_images`.
     shared : tuple
         ``(reference gray, reference features, InspectParams)``, sent once per worker.
 
@@ -139,19 +119,22 @@ def run(args: argparse.Namespace) -> int:
     params = params_from_args(args)
     if args.out:
         io.check_output_folder(args.out, "`--out`")
-    compile_note("inspect", homography)
     reference = io.read_image(args.reference, "color")
     ref_gray = io.to_gray(reference)
     if int(ref_gray.max()) == int(ref_gray.min()):
         raise InputError(f"{args.reference}: the reference is blank (one grey level {int(ref_gray.min())}); "
                          "nothing to register probes to", file=args.reference)
+
+    def announce():  # once a probe was read: bad inputs fail first, without the note
+        compile_note("inspect", homography)
+
     ref_feats = detect(ref_gray, params.features.detector, params.features.max_features)
     stems = overlay_stems(args.probes)
     pictures = overlay_paths(args.probes, args.overlay, "_regions")
     results, errors = [], []
     # checked before any probe runs: a bad address is one line and nothing is written
     scheduler = check_scheduler(args.scheduler, "--scheduler")
-    items = map_items(inspect_probe, _read_probes(args.probes), shared=(ref_gray, ref_feats, params),
+    items = map_items(inspect_probe, read_images(args.probes, "color", first_read=announce), shared=(ref_gray, ref_feats, params),
                       scheduler=scheduler, total=len(args.probes))
     # the results first: the bar counts probes done, not started
     for res, (path, stem, picture) in zip(items, progress(list(zip(args.probes, stems, pictures)), "inspect")):

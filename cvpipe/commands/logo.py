@@ -9,7 +9,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..params import LogoFeaturesParams, LogoMatchParams, LogoVerifyParams
-from . import compile_note, overlay_paths, progress, step
+from . import (DETECTORS, add_feature_arguments, add_result_arguments, compile_note, overlay_paths,  # noqa: F401
+               progress, read_images, step)  # DETECTORS: the ``--method`` choices (a test keeps them equal)
 
 if TYPE_CHECKING:
     from .. import logo
@@ -17,9 +18,8 @@ if TYPE_CHECKING:
 HELP = "recognise gallery logos in scene photos (brand or none, and the logo outline)"
 EXAMPLE = ("cvpipe logo data/samples/logo/scenes/scene_00.jpg --gallery data/samples/logo/gallery "
            "--overlay logo.png --json")
-
-#: ``--method`` choices: the keys of ``cvpipe.features.DETECTORS`` (a test keeps them equal)
-DETECTORS = ("akaze", "brisk", "orb", "sift")
+#: ``--overlay`` with several scenes: ``<folder>/<scene stem>_logo.png``
+SUFFIX = "_logo"
 
 
 def gallery_files(folder: str | Path) -> list[tuple[str, Path]]:
@@ -94,27 +94,13 @@ class SharedGallery:
         return self._gallery
 
 
-def _read_scenes(paths: list[str]):
-    """``(scene, gray image or None, read error or None)`` per path, lazily: the image travels with its task and a
-    read error fails only its own item."""
-    from .. import io
-    from ..errors import CvpipeError
-
-    for path in paths:
-        try:
-            # as before: a JPEG decoded to gray is not cvtColor's gray
-            yield path, io.read_image(path, "gray"), None
-        except CvpipeError as exc:
-            yield path, None, exc
-
-
 def recognize_scene(item: tuple, shared: tuple) -> tuple[dict, list, list]:
     """Recognise one scene, an item of :func:`cvpipe.compute.map_items` (runs on a worker).
 
     Parameters
     ----------
     item : tuple
-        ``(scene name, gray image or None, read error or None)`` from :func:`_read_scenes`.
+        ``(scene name, gray image or None, read error or None)`` from :func:`cvpipe.commands.read_images`.
     shared : tuple
         ``(SharedGallery, method, max_features, min_long_side, LogoMatchParams, LogoVerifyParams, seed)``.
 
@@ -157,26 +143,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scenes", nargs="+", metavar="SCENE", help="scene photos")
     parser.add_argument("--gallery", required=True, metavar="DIR",
                         help="reference logos: DIR/<brand>.<ext> or DIR/<brand>/*.<ext>")
-    parser.add_argument("--method", type=str.lower, default=fp.detector, choices=DETECTORS,
-                        help=f"keypoint detector (default {fp.detector})")
-    parser.add_argument("--max-features", type=int, default=fp.max_features,
-                        help=f"keypoints per image (default {fp.max_features})")
+    add_feature_arguments(parser, fp.detector, fp.max_features, mp.ratio, flag="--method")
     parser.add_argument("--min-long-side", type=int, default=fp.scene_min_long_side,
                         help=f"enlarge smaller scene photos to this long side before detection, 0 = never "
                              f"(default {fp.scene_min_long_side})")
-    parser.add_argument("--ratio", type=float, default=mp.ratio, help=f"ratio test (default {mp.ratio})")
     parser.add_argument("--threshold", type=float, default=vp.score_threshold,
                         help=f"score (-log10 NFA) needed to name a brand (default {vp.score_threshold})")
     parser.add_argument("--seed", type=int, default=0, help="RANSAC seed (default 0)")
-    parser.add_argument("--overlay", metavar="PNG",
-                        help="write the scene with each found logo outlined and named; with several scenes, PNG "
-                             "is a folder and each scene gets <scene>_logo.png")
-    parser.add_argument("--json", action="store_true",
-                        help='print a JSON list, one record per scene ({"scene", "brand", "inliers", "score", '
-                             '"quad", "logos": [every brand found, best first], "overlay"})')
-    parser.add_argument("--scheduler", default="", metavar="ADDR",
-                        help="run the scenes on Dask: 'local' or a scheduler address tcp://host:port "
-                             "(default: in process)")
+    add_result_arguments(parser, "write the scene with each found logo outlined and named", items="scenes",
+                         suffix=SUFFIX, json='print a JSON list, one record per scene ({"scene", "brand", "inliers", '
+                                             '"score", "quad", "logos": [every brand found, best first], "overlay"})')
 
 
 def run(args: argparse.Namespace) -> int:
@@ -196,15 +172,16 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"`--min-long-side` must be a non-negative number of pixels, got {args.min_long_side}")
     from .. import homography
 
-    compile_note("logo", homography)
     scheduler = check_scheduler(args.scheduler, "--scheduler")
     with step(f"gallery ({args.method})"):
         g = SharedGallery(gallery_references(args.gallery, args.method, args.max_features), mp)
         g.gallery  # noqa: B018 - index here too, so that a gallery error is one line before any scene runs
     records, failed = [], 0
     shared = (g, args.method, args.max_features, args.min_long_side, mp, vp, args.seed)
-    pictures = overlay_paths(args.scenes, args.overlay, "_logo")
-    items = map_items(recognize_scene, _read_scenes(args.scenes), shared=shared, scheduler=scheduler,
+    pictures = overlay_paths(args.scenes, args.overlay, SUFFIX)
+    # the note once a scene was read: gallery and scene errors come first, without it
+    scenes = read_images(args.scenes, "gray", named=True, first_read=lambda: compile_note("logo", homography))
+    items = map_items(recognize_scene, scenes, shared=shared, scheduler=scheduler,
                       total=len(args.scenes))
     # the results first: the bar counts scenes done, not started
     for res, (scene, picture) in zip(items, progress(list(zip(args.scenes, pictures)), "logo")):

@@ -3,21 +3,22 @@
 from __future__ import annotations
 
 import argparse
+import typing
 from pathlib import Path
 
 from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
                       PanoramaWarpParams, replace)
-from . import compile_note, progress, step, with_flags
+from . import (DETECTORS, add_feature_arguments, add_param_options, add_result_arguments,  # noqa: F401
+               compile_note, log, progress, step, with_flags)
 
 HELP = "stitch overlapping photos (any order) into one seamless, cropped panorama"
 EXAMPLE = "cvpipe stitch data/samples/panorama/coffee/*.jpg -o pano.png --projection plane --json"
 
 _F, _M, _W, _B = PanoramaFeaturesParams(), PanoramaMatchParams(), PanoramaWarpParams(), PanoramaBlendParams()
 _H = PanoramaHomographiesParams()
-#: choices: ``cvpipe.panorama.warp.PROJECTIONS`` and ``cvpipe.features.DETECTORS`` keys (a test keeps them equal)
-PROJECTIONS = ("plane", "cylindrical", "spherical")
-DETECTORS = ("akaze", "brisk", "orb", "sift")
-REFINE = ("auto", "homography", "rotation", "none")
+#: ``--projection`` choices, from the params model: ``cvpipe.panorama.warp.PROJECTIONS`` (a test keeps them equal;
+#: DETECTORS likewise)
+PROJECTIONS = typing.get_args(PanoramaWarpParams.model_fields["projection"].annotation)
 #: parameters that the panorama's hints name, spelt as flags in this command's messages
 _HINTED = ("min_inliers", "min_confidence", "max_features", "work_megapix", "refine")
 
@@ -25,32 +26,24 @@ _HINTED = ("min_inliers", "min_confidence", "max_features", "work_megapix", "ref
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("images", nargs="+", metavar="IMAGE", help="two or more overlapping photos, any order")
     parser.add_argument("-o", "--out", required=True, metavar="PANO.png", help="where to write the panorama")
-    parser.add_argument("--projection", choices=PROJECTIONS, default=_W.projection,
-                        help=f"panorama surface (default {_W.projection})")
-    parser.add_argument("--blender", choices=("multiband", "feather"), default=_B.blender,
-                        help=f"blending (default {_B.blender})")
-    parser.add_argument("--detector", type=str.lower, choices=DETECTORS, default=_F.detector,
-                        help=f"feature detector (default {_F.detector})")
-    parser.add_argument("--max-features", type=int, default=_F.max_features,
-                        help=f"keypoints per image (default {_F.max_features})")
-    parser.add_argument("--ratio", type=float, default=_M.ratio, help=f"Lowe's ratio test (default {_M.ratio})")
-    parser.add_argument("--min-inliers", type=int, default=_M.min_inliers,
-                        help=f"RANSAC inliers a pair of photos needs (default {_M.min_inliers})")
-    parser.add_argument("--min-confidence", type=float, default=_M.min_confidence,
-                        help=f"pair confidence inliers / (8 + 0.3 matches) needed (default {_M.min_confidence:g})")
-    parser.add_argument("--refine", choices=REFINE, default=_H.refine,
-                        help=f"global refinement of the homographies (default {_H.refine})")
-    parser.add_argument("--work-megapix", type=float, default=_F.work_megapix,
-                        help=f"registration resolution in megapixels, <= 0 for full (default {_F.work_megapix})")
-    parser.add_argument("--compose-megapix", type=float, default=_W.compose_megapix,
-                        help=f"output resolution in megapixels per image, <= 0 for full (default {_W.compose_megapix})")
+    add_param_options(parser, _W, {"projection": "panorama surface"})
+    add_param_options(parser, _B, {"blender": "blending",
+                                   "gain_compensation": "exposure compensation between the photos: one gain per "
+                                                        "photo, per colour channel, per block of --gain-block px, "
+                                                        "or both (OpenCV's compensators)",
+                                   "gain_block": "block size in pixels of the block compensators"})
+    add_feature_arguments(parser, _F.detector, _F.max_features, _M.ratio)
+    add_param_options(parser, _M, {"min_inliers": "RANSAC inliers a pair of photos needs",
+                                   "min_confidence": "pair confidence inliers / (8 + 0.3 matches) needed"})
+    add_param_options(parser, _H, {"refine": "global refinement of the homographies"})
+    add_param_options(parser, _F, {"work_megapix": "registration resolution in megapixels, <= 0 for full"})
+    add_param_options(parser, _W, {"compose_megapix": "output resolution in megapixels per image, <= 0 for full"})
     parser.add_argument("--no-crop", action="store_true", help="keep the empty borders (default: crop them)")
-    parser.add_argument("--overlay", metavar="PNG",
-                        help="write the panorama with each used photo's outline and name (--projection plane)")
-    parser.add_argument("--seed", type=int, default=_M.seed, help=f"RANSAC seed (default {_M.seed})")
-    parser.add_argument("--json", action="store_true",
-                        help='print {"out", "used": [paths], "dropped": [{"image": path, "reason"}], "homographies", '
-                             '"size", ...} on stdout')
+    add_param_options(parser, _M, {"seed": "RANSAC seed"})
+    add_result_arguments(parser, overlay="write the panorama with each used photo's outline and name (--projection "
+                                         "plane)",
+                         json='print {"out", "used": [paths], "dropped": [{"image": path, "reason"}], "homographies", '
+                              '"size", ...} on stdout')
 
 
 #: peak bytes per composed input pixel (warped image, masks, seams and multiband pyramids, canvas share);
@@ -107,9 +100,10 @@ def run(args: argparse.Namespace) -> int:
             homographies=replace(_H, refine=args.refine),
             warp=replace(_W, projection=args.projection,
                          compose_megapix=_compose_within_budget(images, args.compose_megapix)),
-            blend=replace(_B, blender=args.blender))
+            blend=replace(_B, blender=args.blender, gain_compensation=args.gain_compensation,
+                          gain_block=args.gain_block))
     except ValueError as exc:
-        raise InputError(with_flags(str(exc), _HINTED + ("ratio", "compose_megapix"))) from exc
+        raise InputError(with_flags(str(exc), _HINTED + ("ratio", "compose_megapix", "gain_block"))) from exc
     compile_note("panorama", homography, linalg, _kernels)
     try:
         with step(f"stitch {len(images)} images"):
@@ -117,6 +111,8 @@ def run(args: argparse.Namespace) -> int:
                            ids=[args.images[k] for k in positions])  # messages name the files
     except EstimationError as exc:
         raise EstimationError(with_flags(str(exc), _HINTED)) from exc
+    for name, seconds in pano.timings.items():  # the library's own step timings, shown with -v
+        log.info("  %s: %.3f s", name, seconds)
     io.save_image(args.out, pano.image)
     reg = pano.registration
     for k, why in reg.dropped:
