@@ -124,7 +124,7 @@ def test_output_path_that_is_a_folder_names_no_temporary(capsys, views, tmp_path
 
 
 def test_unexpected_exception_is_one_line_exit_1(capsys, monkeypatch, views):
-    monkeypatch.setattr(hough, "canny_edges", lambda *a, **k: 1 / 0)
+    monkeypatch.setattr(hough, "edges_of", lambda *a, **k: 1 / 0)
     code, lines, doc = run_main(capsys, ["hough", views["a"], "--json"])
     assert code == 1 and "ZeroDivisionError" in only_error_line(lines) and doc["exit"] == 1
 
@@ -139,7 +139,7 @@ def test_keyboard_interrupt_wrapped_by_numba_is_exit_130(capsys, monkeypatch, vi
         except KeyboardInterrupt as exc:  # what numba's parallel launcher turns a Ctrl-C into
             raise SystemError("<built-in function ...> returned a result with an exception set") from exc
 
-    monkeypatch.setattr(hough, "canny_edges", parallel_kernel)
+    monkeypatch.setattr(hough, "edges_of", parallel_kernel)
     code, lines, doc = run_main(capsys, ["hough", views["a"], "--json"])
     assert code == 130 and only_error_line(lines) == "cvpipe: error: interrupted"
     assert doc == {"error": "interrupted", "file": None, "exit": 130}
@@ -168,7 +168,7 @@ class CCallback:
     def __del__(self):
         raise KeyboardInterrupt  # unraisable, as inside a callback run from C
 
-def canny_edges(gray, *a, **k):
+def edges_of(gray, *a, **k):
     CCallback()
     t0 = time.monotonic()
     while time.monotonic() - t0 < 20:  # ordinary Python work (numba's compiler) that must be interrupted
@@ -178,7 +178,7 @@ def canny_edges(gray, *a, **k):
     # a library that catches everything eats the KeyboardInterrupt of a real SIGINT; the program's handler has
     # recorded it, so the step ends the command before anything is printed from it
     "by a library": """
-def canny_edges(gray, *a, **k):
+def edges_of(gray, *a, **k):
     try:
         os.kill(os.getpid(), signal.SIGINT)
         time.sleep(5)
@@ -191,7 +191,7 @@ def canny_edges(gray, *a, **k):
 @pytest.mark.parametrize("how", SWALLOWED)
 def test_swallowed_ctrl_c_still_ends_with_130(views, how):
     code = ("import os, signal, time\nimport numpy as np\nfrom cvpipe import hough\n" + SWALLOWED[how]
-            + "\nhough.canny_edges = canny_edges\n")
+            + "\nhough.edges_of = edges_of\n")
     assert_interrupted(run_program(code, "hough", views["a"], "--json"))
 
 

@@ -58,8 +58,10 @@ def run(args: argparse.Namespace) -> int:
             "try another --detector, more --max-features or a larger --ratio"
         )
     with step(f"estimate ({args.method})"):
-        fit = homography.estimate(args.method, src, dst, threshold=args.threshold, confidence=args.confidence,
-                                  max_iters=args.max_iters, rng=args.seed)
+        # the flags into the section unvalidated: the estimator checks the values and names them
+        fields = HomographyEstimateParams.model_fields
+        e = HomographyEstimateParams().model_copy(update={k: getattr(args, k) for k in fields})
+        fit = homography.estimate_with(src, dst, e, args.method)
     result = {"H": fit.H, "matches": len(src), "inliers": fit.num_inliers}
     if args.overlay:
         from ..overlays import checkerboard_warp

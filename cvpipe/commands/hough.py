@@ -59,7 +59,7 @@ def image_lines(item: tuple, shared: tuple):
     item : tuple
         ``(gray image or None, read error or None)`` from :func:`cvpipe.commands.read_images`.
     shared : tuple
-        ``(HoughEdgesParams, (canny low, high), method, rho, theta in radians, threshold, keyword arguments)``.
+        ``(HoughEdgesParams, HoughLinesParams, method)``: the sections with the command's flags in them.
 
     Returns
     -------
@@ -71,10 +71,8 @@ def image_lines(item: tuple, shared: tuple):
     gray, error = item
     if error is not None:
         raise error
-    e, canny, method, rho, theta, threshold, kwargs = shared
-    edges = hough.canny_edges(gray, canny[0], canny[1], aperture=e.aperture, l2_gradient=e.l2_gradient,
-                              blur_sigma=e.blur_sigma)
-    return hough.get_impl(method)(edges, rho, theta, threshold, **kwargs)
+    edges_params, lines_params, method = shared
+    return hough.detect_lines(hough.edges_of(gray, edges_params), lines_params, method)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -99,9 +97,12 @@ def run(args: argparse.Namespace) -> int:
         def announce():  # once an image was read: a bad image fails first, without the note
             compile_note("hough", (_kernels, [_kernels._edge_points, vote, _kernels._peaks]))
     scheduler = check_scheduler(args.scheduler, "--scheduler")
-    kwargs = {"refine": True} if args.refine else {}
-    shared = (HoughEdgesParams(), tuple(args.canny), method, args.rho, math.radians(args.theta_deg), args.threshold,
-              kwargs)
+    # the flags go into the sections unvalidated (model_copy): the library checks them and names the values, and
+    # the checks above name the flags
+    edges_params = HoughEdgesParams().model_copy(update={"canny_low": args.canny[0], "canny_high": args.canny[1]})
+    lines_params = HoughLinesParams().model_copy(update={"rho": args.rho, "theta_deg": args.theta_deg,
+                                                         "threshold": args.threshold, "refine": args.refine})
+    shared = (edges_params, lines_params, method)
     pictures = overlay_paths(args.image, args.overlay, SUFFIX)
     with step(f"lines ({method})"):
         images = read_images(args.image, "gray", first_read=announce)

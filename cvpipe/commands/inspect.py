@@ -114,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
     from .. import defect as defects, homography, io
     from ..compute import check_scheduler, item_error, map_items, raise_unexpected
     from ..errors import EstimationError, InputError
-    from ..features import detect
+    from ..features import detect_with
 
     params = params_from_args(args)
     if args.out:
@@ -128,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
     def announce():  # once a probe was read: bad inputs fail first, without the note
         compile_note("inspect", homography)
 
-    ref_feats = detect(ref_gray, params.features.detector, params.features.max_features)
+    ref_feats = detect_with(ref_gray, params.features)
     stems = overlay_stems(args.probes)
     pictures = overlay_paths(args.probes, args.overlay, "_regions")
     results, errors = [], []

@@ -95,13 +95,12 @@ def run(args: argparse.Namespace) -> int:
     info, geometry, left, right, auto_disp = _prepare(args, left, right, calib)
     max_disp = auto_disp if args.max_disp == "auto" else args.max_disp
     method, params_cls = args.method, CLI_METHODS[args.method]
-    options = params_cls().model_dump()
     if method == "sgm":
         from ..stereo import _kernels
 
         compile_note("stereo", _kernels)
     with step(f"disparity ({method})"):
-        disp = stereo.compute_disparity(left, right, max_disp, method, **options)
+        disp = stereo.disparity_with(left, right, max_disp, params_cls(), method)
     _save_map(args.out, disp.astype(np.float32), 0.0, float(max_disp), "px", "disparity")
     out = {"valid_fraction": float(np.isfinite(disp).mean()), "max_disp": int(max_disp), "out": args.out, **info}
     if args.overlay:
