@@ -14,18 +14,16 @@ import argparse
 import os
 import statistics
 import time
+import typing
 from pathlib import Path
 
-import cv2
-import numpy as np
-from tqdm import tqdm
-
-from .. import defect, io
 from ..errors import CvpipeError, InputError
-from ..features import detect
-from ..matching import match
-from ..metrics import DetectionCounts, match_boxes
 from ..params import InspectParams, replace
+
+if typing.TYPE_CHECKING:  # annotations only: the modules are imported inside the functions that use them,
+    # so that `cvpipe bench defect --help` imports neither numpy nor cv2 nor numba
+    import numpy as np
+
 
 HELP = "defect inspection on DeepPCB pairs warped by random homographies (ours vs the seed's plain difference)"
 EXAMPLE = "cvpipe bench defect --data ../shared/data --limit 20"
@@ -57,6 +55,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def load_pairs(root: Path, split: str = "all") -> list[dict]:
     """DeepPCB pairs listed in ``PCBData/pairs.txt``: template/test paths, boxes (K, 4) and the split."""
+    import numpy as np
+
     base = root / "deeppcb" / "PCBData"
     listing = base / "pairs.txt"
     if not listing.is_file():
@@ -81,6 +81,8 @@ def load_pairs(root: Path, split: str = "all") -> list[dict]:
 def random_homography(rng: np.random.Generator, size: tuple[int, int], max_rot_deg: float = 4.0,
                       max_scale: float = 0.05, max_shift: float = 15.0, max_persp: float = 2e-5) -> np.ndarray:
     """A small homography about the image centre (reference -> probe pixels)."""
+    import numpy as np
+
     w, h = size
     c = np.array([(w - 1) / 2, (h - 1) / 2])
     t = np.deg2rad(rng.uniform(-max_rot_deg, max_rot_deg))
@@ -101,6 +103,10 @@ def make_probe(img: np.ndarray, boxes: np.ndarray, rng: np.random.Generator) -> 
     Pixels the original does not cover are filled with its median (bare board). Boxes keep their mapped bounds,
     clipped to the frame; a box with less than half of its mapped area inside the frame is dropped.
     """
+    import cv2
+    import numpy as np
+    from .. import defect
+
     h, w = img.shape[:2]
     H = random_homography(rng, (w, h))
     fill = float(np.median(img))
@@ -131,6 +137,12 @@ def seed_method(reference: np.ndarray, probe: np.ndarray, ref_feats, threshold: 
     ``ref_feats`` are the reference's SIFT features. Returns the regions (K, 4) in probe pixels; raises
     ``CvpipeError`` when registration fails.
     """
+    import cv2
+    import numpy as np
+    from .. import defect
+    from ..features import detect
+    from ..matching import match
+
     fq = detect(probe, "sift", 4000)
     m = match(ref_feats.descriptors, fq.descriptors, 0.75)
     if len(m) < 4:
@@ -149,6 +161,9 @@ def seed_method(reference: np.ndarray, probe: np.ndarray, ref_feats, threshold: 
 
 
 def _score(counts: dict, verdicts: list[tuple[str, str]]) -> dict:
+    import numpy as np
+    from ..metrics import DetectionCounts
+
     faulty = [v for t, v in verdicts if t == "faulty"]
     perfect = [v for t, v in verdicts if t == "perfect"]
     c: DetectionCounts = counts
@@ -164,6 +179,12 @@ def _score(counts: dict, verdicts: list[tuple[str, str]]) -> dict:
 def evaluate(pairs: list[dict], seed: int, params: InspectParams, baseline: bool = True,
              progress: bool | None = None) -> dict:
     """Run ours (and the seed's method) on both probes of every pair; return metrics and timings."""
+    import numpy as np
+    from tqdm import tqdm
+    from .. import defect, io
+    from ..features import detect
+    from ..metrics import DetectionCounts, match_boxes
+
     pad = params.regions.pad
     tight = replace(params.regions, pad=0.0)
     names = ["ours", "ours_tight_boxes"] + (["seed"] if baseline else [])
@@ -225,6 +246,9 @@ def evaluate(pairs: list[dict], seed: int, params: InspectParams, baseline: bool
 
 
 def run(args: argparse.Namespace) -> int:
+    import cv2
+    from .. import defect, io
+
     if not args.data:
         raise InputError("no data root: pass --data DIR or set CVPIPE_DATA")
     if args.limit < 0:

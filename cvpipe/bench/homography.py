@@ -12,17 +12,19 @@ import argparse
 import csv
 import os
 import time
+import typing
 from pathlib import Path
 
-import numpy as np
-from tqdm import tqdm
-
-from .. import io
 from ..errors import EstimationError, InputError
-from ..features import DETECTORS
-from ..homography import METHODS, correspondences, estimate, transform_points
-from ..metrics import corner_error
-from ..params import FeaturesParams, HomographyEstimateParams, MatchParams
+from ..params import Detector, FeaturesParams, HomographyEstimateParams, MatchParams
+
+#: --detector choices: the names of cvpipe.features.DETECTORS, read from the params model (no cv2 for --help)
+DETECTORS = typing.get_args(Detector)
+
+if typing.TYPE_CHECKING:  # annotations only: the modules are imported inside the functions that use them,
+    # so that `cvpipe bench homography --help` imports neither numpy nor cv2 nor numba
+    import numpy as np
+
 
 HELP = "our homography estimator vs OpenCV RANSAC/MAGSAC: Oxford + CMP pairs and a synthetic outlier sweep"
 EXAMPLE = "cvpipe bench homography --data ../shared/data --repeats 5"
@@ -65,6 +67,8 @@ def real_pairs(root: Path, sets=SETS) -> list[dict]:
     Oxford: ``<seq>/img1 -> imgN`` with ``H1toNp`` (1 -> N). CMP: ``pairs/<name>A -> <name>B`` with
     ``derived/<name>_H_A_to_B.txt`` (the original ``<name>_model.txt`` maps B -> A).
     """
+    import numpy as np
+
     pairs: list[dict] = []
     if "oxford" in sets:
         base = root / "oxford_affine"
@@ -97,6 +101,9 @@ def synthetic_scene(rng: np.random.Generator, n: int, outlier_frac: float, noise
                     width: int = 640, height: int = 480) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A random perspective H (corners moved by up to 20 % of the size), n correspondences with Gaussian noise of
     ``noise`` px on dst, and ``outlier_frac`` of them replaced by uniform points. Returns (H, src, dst)."""
+    import numpy as np
+    from ..homography import transform_points
+
     corners = np.array([[0, 0], [width - 1, 0], [width - 1, height - 1], [0, height - 1]], float)
     moved = corners + rng.uniform(-0.2, 0.2, (4, 2)) * [width, height]
     import cv2
@@ -116,6 +123,8 @@ def synthetic_scene(rng: np.random.Generator, n: int, outlier_frac: float, noise
 
 def _timed(method: str, src, dst, seed: int, **kw) -> tuple[np.ndarray | None, int, float, float]:
     """(H or None, inliers, wall seconds, CPU seconds) of one estimate."""
+    from ..homography import estimate
+
     w0, c0 = time.perf_counter(), time.process_time()
     try:
         fit = estimate(method, src, dst, rng=seed, **kw)
@@ -131,6 +140,10 @@ def _run_all(src, dst, repeats: int, H_true, size, vpts=None, **kw) -> dict:
     ``vpts`` (K, 4) ``xA yA xB yB``: hand-clicked validation correspondences (CMP); their mean transfer error A -> B
     is recorded as ``vpts_error_px`` (the corner error extrapolates far outside a plane that covers part of A).
     """
+    import numpy as np
+    from ..homography import METHODS, transform_points
+    from ..metrics import corner_error
+
     methods = list(METHODS)
     rec = {m: {"err": [], "wall": [], "cpu": [], "inliers": [], "vp": []} for m in methods}
     for r in range(repeats):
@@ -154,6 +167,9 @@ def _run_all(src, dst, repeats: int, H_true, size, vpts=None, **kw) -> dict:
 
 def _warm_up(kw: dict) -> float:
     """Run every method once (numba compile or cache load, OpenCV initialisation); returns ours' first-call time."""
+    import numpy as np
+    from ..homography import METHODS, estimate
+
     rng = np.random.default_rng(0)
     H, src, dst = synthetic_scene(rng, 200, 0.5)
     t0 = time.perf_counter()
@@ -165,6 +181,10 @@ def _warm_up(kw: dict) -> float:
 
 
 def bench_real(root: Path, args) -> list[dict]:
+    from tqdm import tqdm
+    from .. import io
+    from ..homography import METHODS, correspondences
+
     kw = dict(threshold=args.threshold, confidence=args.confidence, max_iters=args.max_iters)
     pairs = real_pairs(root, args.sets)
     if not pairs:
@@ -187,6 +207,10 @@ def bench_real(root: Path, args) -> list[dict]:
 
 
 def bench_synthetic(args) -> list[dict]:
+    import numpy as np
+    from tqdm import tqdm
+    from ..homography import METHODS
+
     kw = dict(threshold=args.threshold, confidence=args.confidence, max_iters=args.synthetic_max_iters)
     rows = []
     for frac in args.outliers:
@@ -215,6 +239,9 @@ def bench_synthetic(args) -> list[dict]:
 
 
 def summarize(rows: list[dict], success_px: float) -> dict:
+    import numpy as np
+    from ..homography import METHODS
+
     out = {}
     for m in METHODS:
         errs = np.array([r["methods"][m]["corner_error_px"] for r in rows])
@@ -236,12 +263,16 @@ def summarize(rows: list[dict], success_px: float) -> dict:
 
 
 def _f(v, fmt="{:.2f}") -> str:
+    import numpy as np
+
     if v is None:
         return "-"
     return "fail" if not np.isfinite(v) else fmt.format(v)
 
 
 def markdown(result: dict) -> str:
+    from ..homography import METHODS
+
     lines = []
     names = {"ours": "ours", "opencv_ransac": "cv2 RANSAC", "opencv_magsac": "cv2 MAGSAC"}
     if result.get("real"):
@@ -289,6 +320,8 @@ def markdown(result: dict) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from .. import io
+
     if args.repeats < 1:
         raise InputError(f"`--repeats` must be >= 1, got {args.repeats}")
     if args.synthetic_trials < 1 or args.synthetic_points < 8:

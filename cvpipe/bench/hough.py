@@ -13,16 +13,17 @@ from __future__ import annotations
 import argparse
 import os
 import time
+import typing
 from pathlib import Path
 
-import cv2
-import numpy as np
-from tqdm import tqdm
-
-from .. import hough, io
 from . import fresh_cache_output
 from ..errors import InputError
 from ..params import HoughEdgesParams, HoughLinesParams
+
+if typing.TYPE_CHECKING:  # annotations only: the modules are imported inside the functions that use them,
+    # so that `cvpipe bench hough --help` imports neither numpy nor cv2 nor numba
+    import numpy as np
+
 
 HELP = "our Hough lines vs cv2.HoughLines on York Urban: parity, speed ratio, ground-truth recall"
 EXAMPLE = "cvpipe bench hough --data ../shared/data --json"
@@ -58,6 +59,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _gt_segments(path: Path) -> np.ndarray:
+    import numpy as np
+
     rows = [line.split() for line in path.read_text().splitlines() if line.strip() and not line.startswith("#")]
     seg = np.array([[float(v) for v in r[:4]] for r in rows], np.float64).reshape(-1, 4)
     return seg - 1.0  # MATLAB 1-based -> 0-based pixel coordinates
@@ -77,6 +80,11 @@ def _timed(fn) -> float:
 
 
 def run(args: argparse.Namespace) -> int:
+    import cv2
+    import numpy as np
+    from tqdm import tqdm
+    from .. import hough, io
+
     if not args.data:
         raise InputError("no data root: pass --data DIR or set CVPIPE_DATA")
     root = Path(args.data) / "yorkurban_lines"

@@ -24,16 +24,17 @@ import csv
 import os
 import statistics
 import time
+import typing
 from pathlib import Path
 
-import cv2
-import numpy as np
-from tqdm import tqdm
-
-from .. import io, logo
 from ..errors import InputError
-from ..features import DETECTORS, detect
-from ..params import LogoFeaturesParams, LogoMatchParams, LogoVerifyParams, load_section
+from ..params import DEFAULT_EXTRA_SCORE, Detector, LogoFeaturesParams, LogoMatchParams, LogoVerifyParams, load_section
+
+if typing.TYPE_CHECKING:  # annotations only: the modules are imported inside the functions that use them,
+    # so that `cvpipe bench logo --help` imports neither numpy nor cv2 nor numba
+    import numpy as np
+
+    from .. import logo
 
 #: brands a photo holds beyond its label in the subset (image, brand, reason): the benchmark's documented corrections
 EXTRA_LABELS = Path(__file__).with_name("flickrlogos_extra_labels.csv")
@@ -41,6 +42,8 @@ EXTRA_LABELS = Path(__file__).with_name("flickrlogos_extra_labels.csv")
 HELP = "logo recognition on the FlickrLogos-27 subset: precision, recall, accuracy, PR curve, time per scene"
 EXAMPLE = "cvpipe bench logo --data ../shared/data --json"
 SUBSET = "flickrlogos27_subset"
+#: the detectors compared, in cvpipe.features.DETECTORS order, read from the params model (no cv2 for --help)
+DETECTORS = typing.get_args(Detector)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -60,9 +63,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scene-scale", type=float, default=1.0,
                         help="shrink every scene photo by this factor before detection (0.5 turns the training "
                              "photos' prominent logos into small ones, as in many query photos; default 1)")
-    parser.add_argument("--extra-score", type=float, default=logo.DEFAULT_EXTRA_SCORE,
+    parser.add_argument("--extra-score", type=float, default=DEFAULT_EXTRA_SCORE,
                         help="score a second or later logo of a scene needs in the several-brands figures (default "
-                             f"{logo.DEFAULT_EXTRA_SCORE:g}, chosen on --protocol loo)")
+                             f"{DEFAULT_EXTRA_SCORE:g}, chosen on --protocol loo)")
     parser.add_argument("--json", action="store_true", help="print the full result (with PR curves) as JSON")
 
 
@@ -73,6 +76,9 @@ def load_subset(root: Path, min_box: int = 16) -> tuple[list[tuple[str, str, np.
     A boxed training photo gives one reference per box: the whole photo with the box (clipped to the image), so
     that keypoints come from inside the box while their descriptors see the photo around it.
     """
+    import numpy as np
+    from .. import io
+
     scenes_csv = root / "scenes.csv"
     if not scenes_csv.is_file():
         raise InputError(f"{scenes_csv}: no such file; expected the {SUBSET} folder (see its SOURCE.txt)")
@@ -130,6 +136,8 @@ def load_extra_labels(path: str | Path = EXTRA_LABELS) -> dict[str, set[str]]:
 
 def found_list(det: logo.Detection, score_threshold: float) -> list[list]:
     """``[[brand, score], ...]`` of :func:`cvpipe.logo.every_logo` with no stricter rule for later logos."""
+    from .. import logo
+
     return [[h.brand, float(h.score)] for h in logo.every_logo(det, score_threshold, extra_score=score_threshold)]
 
 
@@ -158,6 +166,8 @@ def multi_evaluate(rows: list[dict], extra_score: float) -> dict:
 def multi_summary(rows: list[dict], extra_score: float, score_threshold: float) -> dict:
     """:func:`multi_evaluate` at ``extra_score`` plus ``sweep``: the figures at every distinct score of a later
     logo (and at ``score_threshold``), for choosing ``extra_score``."""
+    import numpy as np
+
     later = sorted({s for r in rows for s in (x[1] for x in r["found"][1:]) if s >= score_threshold})
     out = multi_evaluate(rows, extra_score)
     out["sweep"] = [multi_evaluate(rows, s) for s in [score_threshold, *later, np.inf]]
@@ -166,6 +176,8 @@ def multi_summary(rows: list[dict], extra_score: float, score_threshold: float) 
 
 def _shrink(gray: np.ndarray, scale: float) -> np.ndarray:
     """The scene photo shrunk by ``scale`` (area interpolation), or as it is for 1."""
+    import cv2
+
     if scale == 1.0:
         return gray
     h, w = gray.shape
@@ -173,6 +185,8 @@ def _shrink(gray: np.ndarray, scale: float) -> np.ndarray:
 
 
 def _mask(shape: tuple[int, int], box: tuple | None) -> np.ndarray | None:
+    import numpy as np
+
     if box is None:
         return None
     mask = np.zeros(shape, np.uint8)
@@ -190,8 +204,12 @@ def _params(path: str) -> tuple[LogoFeaturesParams, LogoMatchParams, LogoVerifyP
 
 def run_benchmark(root: Path, methods: list[str], fp: LogoFeaturesParams, mp: LogoMatchParams, vp: LogoVerifyParams,
                   min_box: int = 16, seed: int = 0, scene_scale: float = 1.0,
-                  extra_score: float = logo.DEFAULT_EXTRA_SCORE) -> dict:
+                  extra_score: float = DEFAULT_EXTRA_SCORE) -> dict:
     """Run every method on the subset; returns per-method metrics, curves, per-scene answers and timings."""
+    from tqdm import tqdm
+    from .. import io, logo
+    from ..features import detect
+
     gallery_imgs, tests = load_subset(root, min_box)
     extra = load_extra_labels()
     galleries, gallery_time = {}, {}
@@ -242,8 +260,13 @@ def run_benchmark(root: Path, methods: list[str], fp: LogoFeaturesParams, mp: Lo
 
 def run_leave_one_out(root: Path, methods: list[str], fp: LogoFeaturesParams, mp: LogoMatchParams,
                       vp: LogoVerifyParams, min_box: int = 16, seed: int = 0, scene_scale: float = 1.0,
-                      extra_score: float = logo.DEFAULT_EXTRA_SCORE) -> dict:
+                      extra_score: float = DEFAULT_EXTRA_SCORE) -> dict:
     """The tuning protocol (see the module docstring): per-method metrics and per-scene answers, no timings."""
+    import numpy as np
+    from tqdm import tqdm
+    from .. import logo
+    from ..features import detect
+
     gallery_imgs, _ = load_subset(root, min_box)
     extra = load_extra_labels()
     photos: dict[str, tuple[str, np.ndarray]] = {}
@@ -306,6 +329,8 @@ def _summarise(ev: dict) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from .. import io
+
     if not args.data:
         raise InputError("no data root: pass --data DIR or set CVPIPE_DATA")
     if not 0.05 <= args.scene_scale <= 1.0:

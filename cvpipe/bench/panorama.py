@@ -25,22 +25,27 @@ import subprocess
 import sys
 import tempfile
 import time
+import typing
 from pathlib import Path
 
-import numpy as np
-from scipy.optimize import least_squares
-
-from .. import io, linalg, panorama
-from ..panorama import report as pictures
-from ..panorama import warp as warping
 from ..errors import EstimationError, InputError
-from ..geometry import apply_homography
-from ..metrics import corner_error
 from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
                       PanoramaWarpParams, replace)
 
+if typing.TYPE_CHECKING:  # annotations only: the modules are imported inside the functions that use them,
+    # so that `cvpipe bench panorama --help` imports neither numpy nor cv2 nor numba
+    import numpy as np
+
+    from .. import panorama
+
+
 HELP = "panorama stitching vs cv2.Stitcher on the Adobe and OpenStitching sets"
 EXAMPLE = "cvpipe bench panorama --data ../shared/data --repeat 3 --json"
+
+#: --projection and --refine choices (cvpipe.panorama's PROJECTIONS and REFINEMENTS), read from the params models
+#: so that --help needs neither cv2 nor numba
+PROJECTIONS = typing.get_args(PanoramaWarpParams.model_fields["projection"].annotation)
+REFINEMENTS = typing.get_args(PanoramaHomographiesParams.model_fields["refine"].annotation)
 
 #: set name -> (folder under the data root, file names in input order, files that must be dropped)
 SETS = {
@@ -64,10 +69,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="data root holding adobe_panoramas/ and stitching_tutorial/ (default $CVPIPE_DATA)")
     parser.add_argument("--sets", nargs="+", choices=list(SETS), default=list(SETS), help="sets to run (default all)")
     parser.add_argument("--repeat", type=int, default=3, help="timed runs of each method per set (default 3)")
-    parser.add_argument("--projection", choices=warping.PROJECTIONS, default="spherical",
+    parser.add_argument("--projection", choices=PROJECTIONS, default="spherical",
                         help="our projection (default spherical, cv2.Stitcher's default warper)")
     parser.add_argument("--detector", default=PanoramaFeaturesParams().detector, help="our feature detector")
-    parser.add_argument("--refine", choices=panorama.REFINEMENTS, default=PanoramaHomographiesParams().refine,
+    parser.add_argument("--refine", choices=REFINEMENTS, default=PanoramaHomographiesParams().refine,
                         help="our global model refinement (default from params)")
     parser.add_argument("--refit-threshold", type=float, default=PanoramaMatchParams().refit_threshold,
                         help="refit each accepted pair on its inliers with this threshold in px, 0 = off "
@@ -78,6 +83,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _gt_pairs(folder: Path, files: list[str]) -> dict[tuple[int, int], np.ndarray]:
     """Ground-truth homographies (input position i -> j) of the Adobe files that are in ``files``."""
+    import numpy as np
+
     pos = {int(re.search(r"-(\d+)\.", f).group(1)): k for k, f in enumerate(files)}
     out = {}
     for p in folder.glob("H*to*.txt"):
@@ -98,6 +105,11 @@ def _accuracy(pano: panorama.Panorama, gt: dict, sizes: list) -> dict:
     * composed: ``G_j^-1 G_i`` from our global homographies (the panorama's geometry), with its median and max,
       the median over adjacent pairs (ii = jj + 1) and the mean error over the ground-truth overlap.
     """
+    import numpy as np
+    from .. import panorama
+    from ..geometry import apply_homography
+    from ..metrics import corner_error
+
     corner, overlap, adjacent, direct, filled = [], [], [], [], []
     graph = pano.graph
     S = {k: panorama.resize_matrix(sizes[k], graph.sizes[k]) for k in range(len(sizes))} if graph else {}
@@ -139,6 +151,10 @@ def _gt_floor(gt: dict, sizes: list) -> float | None:
     """Median corner error against the ground truth of the consistent set of global homographies fitted to the
     ground-truth pairs themselves (robust least squares on the corner positions): roughly the best the composed
     measure can reach with any single set of global homographies, however good the registration."""
+    import numpy as np
+    from scipy.optimize import least_squares
+    from ..metrics import corner_error
+
     nodes = sorted({k for ij in gt for k in ij})
     if len(nodes) < 2:
         return None
@@ -181,6 +197,9 @@ def _gt_floor(gt: dict, sizes: list) -> float | None:
 def _gt_consistency(gt: dict, sizes: list) -> float | None:
     """Median corner disagreement between a ground-truth pair i -> j and its composition through a third image:
     how far the ground truth itself is from one consistent set of homographies."""
+    import numpy as np
+    from ..metrics import corner_error
+
     errs = []
     for (i, j), H in gt.items():
         for (a, k), H1 in gt.items():
@@ -200,6 +219,7 @@ def seam_colour_difference(pano: np.ndarray, labels: np.ndarray, rows: float = S
     both sides covered.
     """
     import cv2
+    import numpy as np
 
     left, right, used = [], [], 0
     for r in range(int(rows * labels.shape[0])):
@@ -226,6 +246,10 @@ def _compare_exposure(w, name: str, out: str | None) -> dict:
     """Every compensator on the same warped images: the seam's colour difference in the sky and the blend time; with
     ``out``, ``<name>_sky_<mode>.jpg`` (the sky around the seam) and ``<name>_sky.png`` (all of them side by side,
     in the order of :data:`cvpipe.panorama.GAIN_CHOICES`)."""
+    import numpy as np
+    from .. import io, panorama
+    from ..panorama import report as pictures
+
     labels = panorama.seam_labels(w)
     found, crops = {}, []
     for mode in panorama.GAIN_CHOICES:
@@ -263,6 +287,8 @@ def _run_command(paths: list[Path], projection: str, out: Path) -> tuple[float, 
 
 
 def _run_ours(images, cfg):
+    from .. import panorama
+
     try:
         return panorama.stitch(images, **cfg, rng=0), None
     except EstimationError as exc:
@@ -270,6 +296,10 @@ def _run_ours(images, cfg):
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+    from .. import io, linalg, panorama
+    from ..panorama import warp as warping
+
     if not args.data:
         raise InputError("no data root: pass --data DIR or set CVPIPE_DATA")
     if args.repeat < 1:

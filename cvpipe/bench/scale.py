@@ -28,16 +28,18 @@ import statistics
 import subprocess
 import sys
 import time
+import typing
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
-from .. import io
-from ..compute import WORKER_ENV, map_items
 from ..errors import InputError
 
-from .. import defect as defects
+if typing.TYPE_CHECKING:  # annotations only: the modules are imported inside the functions that use them,
+    # so that `cvpipe bench scale --help` imports neither numpy nor cv2 nor numba
+    import numpy as np
+
+    from .. import defect as defects
+
 
 HELP = "inspection throughput serial vs a Dask LocalCluster vs an external Dask cluster (probes/s, overhead, memory)"
 EXAMPLE = "cvpipe bench scale --data ../shared/data --max-items 200"
@@ -89,6 +91,9 @@ class References:
 
 def inspect_item(item: tuple, refs: References) -> list:
     """One probe of the stream: ``item`` = (pair index, probe gray); returns [verdict, score, regions]."""
+    import numpy as np
+    from .. import defect as defects
+
     i, probe = item
     r = defects.inspect(refs.images[i], probe, refs.params, reference_features=refs.features(i))
     return [r.verdict, round(float(r.score), 6), np.round(r.probe_regions, 3).tolist()]
@@ -96,6 +101,7 @@ def inspect_item(item: tuple, refs: References) -> list:
 
 def stream(pairs: list[dict], templates: list[np.ndarray], tests: list[np.ndarray], n: int, seed: int):
     """The lazily generated probes ``(pair index, probe)`` (see the module docstring)."""
+    import numpy as np
     from .defect import make_probe
 
     for k in range(n):
@@ -130,6 +136,8 @@ class ExternalCluster:
 
 def worker_environment() -> dict:
     """This environment with cvpipe (this checkout) importable and one thread per library."""
+    from ..compute import WORKER_ENV
+
     env = dict(os.environ, **WORKER_ENV)
     env["PYTHONPATH"] = os.pathsep.join(p for p in [str(ROOT), env.get("PYTHONPATH", "")] if p)
     return env
@@ -179,6 +187,7 @@ def external_cluster(n_workers: int = 2, *, env: dict | None = None, timeout: fl
 
 def _load(data: str) -> tuple[list, list, list]:
     """Every DeepPCB pair, its template and its test image (gray); the same shared data at every stream length."""
+    from .. import io
     from .defect import load_pairs
 
     pairs = load_pairs(Path(data))
@@ -189,6 +198,9 @@ def _load(data: str) -> tuple[list, list, list]:
 
 def measure(mode: str, n: int, data: str, seed: int, address: str = "", overhead_tasks: int = 200) -> dict:
     """Run one configuration in this process; return throughput, overhead, memory and the results' digest."""
+    from .. import defect as defects
+    from ..compute import map_items
+
     pairs, templates, tests = _load(data)
     refs = References(templates, defects.InspectParams())
     t0 = time.perf_counter()
@@ -262,6 +274,8 @@ def _child(argv_json: str) -> None:
 
 def run_fresh(**kwargs) -> dict:
     """:func:`measure` in a fresh interpreter (its own peak memory); stderr passes through for the progress."""
+    from ..compute import WORKER_ENV
+
     snippet = f"from cvpipe.bench.scale import _child; _child({json.dumps(json.dumps(kwargs))})"
     env = worker_environment()
     if kwargs["mode"] == "serial":
@@ -274,6 +288,8 @@ def run_fresh(**kwargs) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
+    from .. import io
+
     if not args.data:
         raise InputError("no data root: pass --data DIR or set CVPIPE_DATA")
     try:

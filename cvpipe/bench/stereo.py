@@ -20,16 +20,17 @@ from __future__ import annotations
 import argparse
 import os
 import time
+import typing
 from pathlib import Path
 
-import cv2
-import numpy as np
-from tqdm import tqdm
-
-from .. import io, stereo
 from . import fresh_cache_output
 from ..errors import InputError
 from ..params import StereoBmParams, StereoSgmParams
+
+if typing.TYPE_CHECKING:  # annotations only: the modules are imported inside the functions that use them,
+    # so that `cvpipe bench stereo --help` imports neither numpy nor cv2 nor numba
+    import numpy as np
+
 
 HELP = "our semi-global matching vs OpenCV BM/SGBM on Middlebury + motorcycle: bad-1/bad-2, density, time"
 EXAMPLE = "cvpipe bench stereo --data ../shared/data --json"
@@ -78,6 +79,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def load_pairs(root: Path) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """name -> (left BGR, right BGR, true disparity of the left image in pixels, NaN = unknown)."""
+    import numpy as np
+    from .. import io
+
     base = root / "middlebury_stereo"
     if not base.is_dir():
         raise InputError(f"{base}: no such folder (expected the Middlebury pairs, see ../shared/data/README.md)")
@@ -100,6 +104,8 @@ def load_pairs(root: Path) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray
 
 def disparity_range(truth: np.ndarray) -> int:
     """Smallest multiple of 16 that exceeds the largest true disparity (OpenCV needs multiples of 16)."""
+    import numpy as np
+
     return int(np.ceil((np.nanmax(truth) + 1) / 16) * 16)
 
 
@@ -118,6 +124,8 @@ def _timed(fn) -> tuple[float, float]:
 
 def _best_sgbm(left, right, max_disp, truth) -> tuple[dict, np.ndarray]:
     """The SGBM (mode, block size) with the lowest bad-2.0 on this pair, and its disparity."""
+    from .. import stereo
+
     best = None
     for mode in stereo.SGBM_MODES:
         for bs in SGBM_BLOCK_SIZES:
@@ -129,6 +137,11 @@ def _best_sgbm(left, right, max_disp, truth) -> tuple[dict, np.ndarray]:
 
 
 def run(args: argparse.Namespace) -> int:
+    import cv2
+    import numpy as np
+    from tqdm import tqdm
+    from .. import io, stereo
+
     if not args.data:
         raise InputError("no data root: pass --data DIR or set CVPIPE_DATA")
     if args.rectify:

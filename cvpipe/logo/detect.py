@@ -9,7 +9,8 @@ import cv2
 import numpy as np
 
 from ..features import Features
-from ..params import LogoMatchParams, LogoVerifyParams
+from ..params import DEFAULT_EXTRA_SCORE, LogoMatchParams, LogoVerifyParams  # noqa: F401
+# DEFAULT_EXTRA_SCORE is declared in cvpipe.params (re-exported here) so `cvpipe bench logo --help` needs no cv2
 from .gallery import Gallery, Reference, build_gallery  # noqa: F401  (Reference, build_gallery: examples)
 from .match import match_scene
 from .verify import Hypothesis, verify
@@ -115,12 +116,6 @@ def quad_iou(a: np.ndarray, b: np.ndarray) -> float:
     inter, _ = cv2.intersectConvexConvex(pa, pb)
     union = area_a + area_b - inter
     return float(inter / union) if union > 0 else 0.0
-
-
-#: score a second or later logo of a scene needs (the first needs ``score_threshold``; the higher one counts).
-#: Chosen on ``cvpipe bench logo --protocol loo``, where no value up to 296 loses or gains anything, so the lowest:
-#: no stricter rule (BENCHMARKS.md, "logo: several brands per photo")
-DEFAULT_EXTRA_SCORE = 0.0
 
 
 def every_logo(det: Detection, score_threshold: float, max_overlap: float = MAX_OVERLAP,

@@ -274,6 +274,11 @@ class LogoMatchParams(Section):
 #: the geometric fitters of :data:`cvpipe.logo.MODELS`
 LogoModel = Literal["affine_homography", "homography"]
 
+#: score a second or later logo of a scene needs (the first needs ``score_threshold``; the higher one counts).
+#: Chosen on ``cvpipe bench logo --protocol loo``, where no value up to 296 loses or gains anything, so the lowest:
+#: no stricter rule (BENCHMARKS.md, "logo: several brands per photo")
+DEFAULT_EXTRA_SCORE = 0.0
+
 
 class LogoVerifyParams(Section):
     """``logo.verify``: homography verification, plausibility checks and the decision threshold.
