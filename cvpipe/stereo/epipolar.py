@@ -34,11 +34,14 @@ import numpy as np
 
 from ..errors import EstimationError, InputError
 from ..geometry import as_points, collinear, hartley_normalization
+from ..params import StereoRectifyParams
 
 #: default iteration cap of :func:`find_fundamental` (7-point samples; ~65 % outliers at confidence 0.999)
 DEFAULT_MAX_ITERS = 5_000
 #: samples solved and scored together
 _BATCH = 64
+#: the ``stereo.rectify`` defaults: the one declaration of :func:`find_fundamental`'s ``threshold``
+_RECTIFY = StereoRectifyParams()
 #: smallest sigma_7 / sigma_1 of a 7-point system in normalized coordinates for the sample to count as regular
 _RANK_EPS = 1e-9
 #: relative size of the smaller principal axis below which a whole point set counts as collinear
@@ -373,7 +376,7 @@ def _homography_share(p1: np.ndarray, p2: np.ndarray, threshold: float, rng: np.
     return fit.num_inliers / len(p1)
 
 
-def find_fundamental(pts1, pts2, threshold: float = 1.0, confidence: float = 0.999,
+def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confidence: float = 0.999,
                      max_iters: int = DEFAULT_MAX_ITERS, min_inliers: int = 15, check_planar: bool = True,
                      rng=None) -> FundamentalFit:
     """Robust fundamental matrix of putative correspondences (7-point RANSAC, MSAC scoring, 8-point refits).

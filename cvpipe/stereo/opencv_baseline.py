@@ -9,7 +9,8 @@ import cv2
 import numpy as np
 
 from ..errors import InputError, check_memory
-from ..params import Section, StereoBmParams, StereoSgbmParams, StereoSgmParams, section_or_default
+from ..params import (Section, StereoBmParams, StereoDepthParams, StereoSgbmParams, StereoSgmParams,
+                      section_or_default)
 from .sgm import _check_pair, _gray, disparity_sgm
 
 #: OpenCV StereoSGBM modes by name
@@ -19,6 +20,9 @@ SGBM_MODES = {
     "sgbm_3way": cv2.StereoSGBM_MODE_SGBM_3WAY,
     "hh4": cv2.StereoSGBM_MODE_HH4,
 }
+#: the ``stereo.opencv_bm`` / ``stereo.opencv_sgbm`` / ``stereo.depth`` defaults: the one declaration of the
+#: keyword defaults below
+_BM, _SGBM, _DEPTH = StereoBmParams(), StereoSgbmParams(), StereoDepthParams()
 
 
 def _from_fixed_point(raw: np.ndarray) -> np.ndarray:
@@ -37,8 +41,9 @@ def _opencv_num_disp(max_disp: int, width: int) -> int:
     return n
 
 
-def disparity_opencv_bm(left: np.ndarray, right: np.ndarray, max_disp: int, *, block_size: int = 15,
-                        uniqueness: int = 15, speckle_size: int = 100, speckle_range: int = 2) -> np.ndarray:
+def disparity_opencv_bm(left: np.ndarray, right: np.ndarray, max_disp: int, *, block_size: int = _BM.block_size,
+                        uniqueness: int = _BM.uniqueness, speckle_size: int = _BM.speckle_size,
+                        speckle_range: int = _BM.speckle_range) -> np.ndarray:
     """OpenCV block matching (``cv2.StereoBM``) on grayscale, returned like :func:`disparity_sgm`.
 
     Parameters
@@ -69,9 +74,10 @@ def disparity_opencv_bm(left: np.ndarray, right: np.ndarray, max_disp: int, *, b
     return disp
 
 
-def disparity_opencv_sgbm(left: np.ndarray, right: np.ndarray, max_disp: int, *, mode: str = "sgbm",
-                          block_size: int = 3, uniqueness: int = 10, speckle_size: int = 100,
-                          speckle_range: int = 2, lr_max_diff: int = 1) -> np.ndarray:
+def disparity_opencv_sgbm(left: np.ndarray, right: np.ndarray, max_disp: int, *, mode: str = _SGBM.mode,
+                          block_size: int = _SGBM.block_size, uniqueness: int = _SGBM.uniqueness,
+                          speckle_size: int = _SGBM.speckle_size, speckle_range: int = _SGBM.speckle_range,
+                          lr_max_diff: int = _SGBM.lr_max_diff) -> np.ndarray:
     """OpenCV semi-global block matching (``cv2.StereoSGBM``), returned like :func:`disparity_sgm`.
 
     Parameters
@@ -122,7 +128,7 @@ METHODS: dict[str, Callable[..., np.ndarray]] = {
 }
 
 
-def compute_disparity(left: np.ndarray, right: np.ndarray, max_disp: int, method: str = "sgm",
+def compute_disparity(left: np.ndarray, right: np.ndarray, max_disp: int, method: str = _DEPTH.method,
                       **options) -> np.ndarray:
     """Disparity of the left image with the registered ``method`` (see :data:`METHODS`); options go to it."""
     if method not in METHODS:

@@ -15,11 +15,14 @@ import numpy as np
 
 from .. import geometry, io
 from ..errors import InputError
+from ..params import StereoRectifyParams
 from . import rectify
 from .calibration import Calibration
 
 #: the kinds of rectification (``rect.json`` ``kind``)
 KINDS = ("none", "calibrated", "uncalibrated")
+#: the ``stereo.rectify`` defaults: the one declaration of the keyword defaults below
+_RECTIFY = StereoRectifyParams()
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,8 +63,9 @@ def _vertical(record: dict, dy: np.ndarray, over: str) -> None:
     record["vertical_error_over"] = f"{len(dy)} {over}"
 
 
-def feature_matches(left: np.ndarray, right: np.ndarray, detector: str = "sift", max_features: int = 4000,
-                    ratio: float = 0.8, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def feature_matches(left: np.ndarray, right: np.ndarray, detector: str = _RECTIFY.detector,
+                    max_features: int = _RECTIFY.max_features, ratio: float = _RECTIFY.ratio,
+                    seed: int = _RECTIFY.seed) -> tuple[np.ndarray, np.ndarray]:
     """Putative matches left -> right (:func:`cvpipe.homography.correspondences`), the same on every run: FLANN's
     randomized KD-trees draw from OpenCV's global generator, which is seeded with ``seed`` first."""
     from ..homography import correspondences
@@ -71,8 +75,10 @@ def feature_matches(left: np.ndarray, right: np.ndarray, detector: str = "sift",
 
 
 def rectify_pair(left: np.ndarray, right: np.ndarray, pts1: np.ndarray, pts2: np.ndarray,
-                 calib: Calibration | None, *, threshold: float = 1.0, margin: float = 1.0, seed: int = 0,
-                 rectified_max_dy: float = 1.0, rectified_share: float = 0.75) -> RectifiedPair:
+                 calib: Calibration | None, *, threshold: float = _RECTIFY.threshold,
+                 margin: float = _RECTIFY.margin, seed: int = _RECTIFY.seed,
+                 rectified_max_dy: float = _RECTIFY.rectified_max_dy,
+                 rectified_share: float = _RECTIFY.rectified_share) -> RectifiedPair:
     """Rectify one pair the way the pipeline does.
 
     The rule: a calibration that holds the rig's pose (an OpenCV stereo file: K1 D1 K2 D2 R T) gives a calibrated

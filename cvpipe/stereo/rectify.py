@@ -39,12 +39,15 @@ import numpy as np
 
 from ..errors import EstimationError, InputError
 from ..geometry import apply_homography
+from ..params import StereoRectifyParams
 from .calibration import Calibration, _check_size
 from .epipolar import FundamentalFit, epipoles, find_fundamental
 
 #: robust extremes of the inlier disparities (percentiles): a few false matches along an epipolar line are inliers
 #: of F with any disparity, so the plain min / max would follow them
 DISPARITY_PERCENTILES = (0.5, 99.5)
+#: the ``stereo.rectify`` defaults: the one declaration of the ``threshold`` / ``margin`` defaults below
+_RECTIFY = StereoRectifyParams()
 #: ``max_disp`` headroom above the largest (robust) inlier disparity: a fraction of it, at least 4 px
 _MAX_DISP_HEADROOM = (0.1, 4.0)
 
@@ -218,7 +221,7 @@ def _disparity_shift(xl: np.ndarray, xr: np.ndarray, margin: float) -> tuple[flo
 # -------------------------------------------------------------------------------------------- uncalibrated
 
 
-def rectifying_homographies(F, pts1, pts2, size, margin: float = 1.0, right_anchor=None) -> tuple:
+def rectifying_homographies(F, pts1, pts2, size, margin: float = _RECTIFY.margin, right_anchor=None) -> tuple:
     """Hartley / Loop-Zhang rectifying homographies of a pair with fundamental matrix ``F``.
 
     Parameters
@@ -301,7 +304,8 @@ def rectifying_homographies(F, pts1, pts2, size, margin: float = 1.0, right_anch
     return H_left / H_left[2, 2], H_right / H_right[2, 2], shift, lo, hi
 
 
-def rectify_uncalibrated(pts1, pts2, size, threshold: float = 1.0, margin: float = 1.0, calibration=None,
+def rectify_uncalibrated(pts1, pts2, size, threshold: float = _RECTIFY.threshold, margin: float = _RECTIFY.margin,
+                         calibration=None,
                          rng=None, fit: FundamentalFit | None = None) -> Rectification:
     """Rectify a pair from its point matches alone (the fundamental matrix), optionally with known intrinsics.
 
@@ -358,8 +362,8 @@ def _jacobian(H: np.ndarray, x: float, y: float) -> np.ndarray:
     return (H[:2, :2] - np.outer(q[:2] / q[2], H[2, :2])) / q[2]
 
 
-def opencv_uncalibrated(pts1, pts2, size, threshold: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                                          np.ndarray]:
+def opencv_uncalibrated(pts1, pts2, size, threshold: float = _RECTIFY.threshold
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """OpenCV's uncalibrated rectification on the same matches: ``cv2.findFundamentalMat`` (USAC_MAGSAC) and
     ``cv2.stereoRectifyUncalibrated``.
 
@@ -383,7 +387,8 @@ def opencv_uncalibrated(pts1, pts2, size, threshold: float = 1.0) -> tuple[np.nd
     return np.asarray(H1, float), np.asarray(H2, float), np.asarray(F, float), inl
 
 
-def rectify_calibrated(calib: Calibration, size, pts1=None, pts2=None, margin: float = 1.0) -> Rectification:
+def rectify_calibrated(calib: Calibration, size, pts1=None, pts2=None, margin: float = _RECTIFY.margin
+                       ) -> Rectification:
     """Calibrated rectification (``cv2.stereoRectify``, ``cv2.initUndistortRectifyMap``) with the disparity shift.
 
     Parameters

@@ -8,10 +8,13 @@ import cv2
 import numpy as np
 
 from .. import geometry, io, metrics
+from ..params import StereoReportParams
 from . import depth as depth_mod
 
 #: bad-pixel thresholds in pixels used by the stages and the benchmark (Middlebury's bad-1.0 and bad-2.0)
 BAD_THRESHOLDS = (1.0, 2.0)
+#: the ``stereo.report`` defaults: the one declaration of :func:`comparison_picture`'s ``error_clip``
+_REPORT = StereoReportParams()
 
 
 def evaluate(disp: np.ndarray, truth: np.ndarray, thresholds: tuple[float, ...] = BAD_THRESHOLDS,
@@ -146,7 +149,7 @@ def _labelled(pic: np.ndarray, label: str, width: int) -> np.ndarray:
 
 
 def comparison_picture(left: np.ndarray, disparities: dict, max_disp: int, truth: np.ndarray | None = None,
-                       error_clip: float = 4.0, width: int = 320) -> np.ndarray:
+                       error_clip: float = _REPORT.error_clip, width: int = 320) -> np.ndarray:
     """One pair's methods side by side: the left image and each method's colour-mapped disparity; with ``truth`` a
     second row with the true disparity and each method's error map (:func:`error_picture`).
 

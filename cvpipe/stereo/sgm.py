@@ -19,11 +19,14 @@ import cv2
 import numpy as np
 
 from ..errors import check_memory
+from ..params import StereoSgmParams
 
 #: most bits a census signature can hold (uint64)
 _CENSUS_BITS = 64
 #: supported numbers of aggregation directions (4: horizontal and vertical; 8: also the diagonals)
 _PATHS = (4, 8)
+#: the ``stereo.sgm`` defaults, the one declaration of :func:`disparity_sgm`'s keyword defaults
+_SGM = StereoSgmParams()
 
 
 # ----------------------------------------------------------------------------------------------- validation
@@ -68,19 +71,19 @@ def disparity_sgm(
     right: np.ndarray,
     max_disp: int,
     *,
-    census_size: tuple[int, int] = (5, 7),
-    ad_weight: float = 0.5,
-    ad_trunc: int = 20,
-    paths: int = 8,
-    p1: int = 15,
-    p2: int = 150,
-    p2_tau: float = 16.0,
-    uniqueness: float = 0.0,
-    subpixel: bool = True,
-    lr_max_diff: float = 2.0,
-    speckle_size: int = 100,
-    speckle_range: float = 2.0,
-    fill: bool = False,
+    census_size: tuple[int, int] = _SGM.census_size,
+    ad_weight: float = _SGM.ad_weight,
+    ad_trunc: int = _SGM.ad_trunc,
+    paths: int = _SGM.paths,
+    p1: int = _SGM.p1,
+    p2: int = _SGM.p2,
+    p2_tau: float = _SGM.p2_tau,
+    uniqueness: float = _SGM.uniqueness,
+    subpixel: bool = _SGM.subpixel,
+    lr_max_diff: float = _SGM.lr_max_diff,
+    speckle_size: int = _SGM.speckle_size,
+    speckle_range: float = _SGM.speckle_range,
+    fill: bool = _SGM.fill,
 ) -> np.ndarray:
     """Disparity of the left image by semi-global matching on a census cost.
 
