@@ -17,8 +17,10 @@ from ._kernels import _chance_hits, _finalize, _normalize, _sq_errors
 from ._ransac_kernels import _SPRT_TM, _collapsed, _ransac_chunk, _sprt_threshold
 from .dlt import _check_pair, _unit_h22
 
-#: default iteration cap of :func:`find_homography` (enough for ~85 % outliers at confidence 0.999)
-DEFAULT_MAX_ITERS = 10_000
+#: the ``homography.estimate`` defaults: the one declaration of the keyword defaults of the estimators here
+_EST = HomographyEstimateParams()
+#: default iteration cap of :func:`find_homography` (10 000: enough for ~85 % outliers at confidence 0.999)
+DEFAULT_MAX_ITERS = _EST.max_iters
 #: initial SPRT guesses: inlier ratio of a good model and consistent fraction of a bad one (both re-estimated)
 _SPRT_EPS0 = 0.05
 _SPRT_DELTA0 = 0.01
@@ -218,9 +220,9 @@ def check_significant(fit: HomographyFit, src, dst, threshold: float, area: floa
 def find_homography(
     src,
     dst,
-    threshold: float = 3.0,
-    confidence: float = 0.999,
-    max_iters: int = DEFAULT_MAX_ITERS,
+    threshold: float = _EST.threshold,
+    confidence: float = _EST.confidence,
+    max_iters: int = _EST.max_iters,
     rng=None,
     *,
     local_optimization: bool = True,
@@ -354,7 +356,8 @@ def find_homography(
 
 
 def _opencv(method_flag_name: str) -> Callable[..., HomographyFit]:
-    def estimate(src, dst, threshold=3.0, confidence=0.999, max_iters=DEFAULT_MAX_ITERS, rng=None, area=None):
+    def estimate(src, dst, threshold=_EST.threshold, confidence=_EST.confidence, max_iters=_EST.max_iters, rng=None,
+                 area=None):
         import cv2
 
         s, d = _check_pair(src, dst)

@@ -4,9 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..params import FeaturesParams, MatchParams
 
-def correspondences(gray_a: np.ndarray, gray_b: np.ndarray, detector: str = "sift", max_features: int = 4000,
-                    ratio: float = 0.8, cross_check: bool = False) -> tuple[np.ndarray, np.ndarray]:
+#: the ``homography.features`` / ``homography.match`` defaults: the one declaration of the keyword defaults below
+_FEATURES, _MATCH = FeaturesParams(), MatchParams()
+
+
+def correspondences(gray_a: np.ndarray, gray_b: np.ndarray, detector: str = _FEATURES.detector,
+                    max_features: int = _FEATURES.max_features, ratio: float = _MATCH.ratio,
+                    cross_check: bool = _MATCH.cross_check) -> tuple[np.ndarray, np.ndarray]:
     """Putative point correspondences A -> B from keypoints, descriptors and the ratio test.
 
     Parameters

@@ -9,9 +9,14 @@ import numpy as np
 
 from ..errors import InputError
 from ..metrics import not_processed_table
+from ..params import HomographyReportParams
+
+#: the ``homography.report`` defaults: the one declaration of the keyword defaults below
+_REPORT = HomographyReportParams()
 
 
-def alignment_checkerboard(img_a: np.ndarray, img_b: np.ndarray, H_ab, tiles: int = 8) -> np.ndarray:
+def alignment_checkerboard(img_a: np.ndarray, img_b: np.ndarray, H_ab, tiles: int = _REPORT.checker_tiles
+                           ) -> np.ndarray:
     """B warped into A's frame by ``H_ab`` (A -> B), interleaved with A in a checkerboard to show misalignment.
 
     Parameters
@@ -102,7 +107,7 @@ def metric_key(name: str) -> str:
     return "pair_all" if key == "all" else key
 
 
-def compare_methods(pairs: list[dict], runs: dict, success_px: float = 3.0) -> dict:
+def compare_methods(pairs: list[dict], runs: dict, success_px: float = _REPORT.success_px) -> dict:
     """Corner error (pairs with truth), inliers and failures of every method on every matched pair.
 
     Parameters
