@@ -10,9 +10,13 @@ from ..params import HoughEdgesParams, section_or_default
 
 __all__ = ["canny_edges", "edges_of"]
 
+#: the ``hough.edges`` defaults: the one declaration of :func:`canny_edges`'s defaults
+_EDGES = HoughEdgesParams()
 
-def canny_edges(gray: np.ndarray, low: float = 50.0, high: float = 150.0, *, aperture: int = 3,
-                l2_gradient: bool = False, blur_sigma: float = 0.0) -> np.ndarray:
+
+def canny_edges(gray: np.ndarray, low: float = _EDGES.canny_low, high: float = _EDGES.canny_high, *,
+                aperture: int = _EDGES.aperture, l2_gradient: bool = _EDGES.l2_gradient,
+                blur_sigma: float = _EDGES.blur_sigma) -> np.ndarray:
     """Canny edge map (uint8, 255 = edge) of a grayscale image, with an optional Gaussian pre-blur.
 
     Parameters

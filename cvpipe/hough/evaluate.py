@@ -8,10 +8,15 @@ import time
 import numpy as np
 
 from ..errors import InputError
-from ..params import HoughReportParams
+from ..params import HoughLinesParams, HoughReportParams
 
 __all__ = ["line_cells", "cell_agreement", "line_segment_matches", "segment_segment_matches", "truth_matches",
            "compare_runs", "metrics_of", "median_seconds"]
+
+#: the ``hough.lines`` / ``hough.report`` defaults: the one declaration of the keyword defaults below (the angles in
+#: radians, converted once here)
+_LINES, _REPORT = HoughLinesParams(), HoughReportParams()
+_THETA, _THETA_TOL = math.radians(_LINES.theta_deg), np.deg2rad(_REPORT.theta_tol_deg)
 
 
 def _as_lines(lines: np.ndarray) -> np.ndarray:
@@ -29,7 +34,8 @@ def _as_segments(segments: np.ndarray) -> np.ndarray:
     return np.asarray(segments, np.float64).reshape(-1, 4)
 
 
-def line_cells(lines: np.ndarray, rho: float = 1.0, theta: float = np.pi / 180, min_theta: float = 0.0) -> np.ndarray:
+def line_cells(lines: np.ndarray, rho: float = _LINES.rho, theta: float = _THETA, min_theta: float = 0.0
+               ) -> np.ndarray:
     """Accumulator cell (angle index, rho index relative to rho = 0) of each line, shape (N, 2) int64.
 
     Examples
@@ -45,7 +51,7 @@ def line_cells(lines: np.ndarray, rho: float = 1.0, theta: float = np.pi / 180, 
     return np.stack([n, r], axis=1)
 
 
-def cell_agreement(ours: np.ndarray, ref: np.ndarray, rho: float = 1.0, theta: float = np.pi / 180,
+def cell_agreement(ours: np.ndarray, ref: np.ndarray, rho: float = _LINES.rho, theta: float = _THETA,
                    min_theta: float = 0.0) -> dict:
     """How many of the reference lines ``ref`` appear in the same accumulator cell in ``ours``.
 
@@ -167,8 +173,8 @@ def segment_segment_matches(found: np.ndarray, segments: np.ndarray, dist_px: fl
     return (along & cover).any(axis=0)
 
 
-def truth_matches(lines: np.ndarray, truth: np.ndarray, rho_tol: float = 3.0, theta_tol: float = np.deg2rad(1.5)
-                  ) -> np.ndarray:
+def truth_matches(lines: np.ndarray, truth: np.ndarray, rho_tol: float = _REPORT.rho_tol,
+                  theta_tol: float = _THETA_TOL) -> np.ndarray:
     """Which true lines ``truth`` (M, 2) ``[rho, theta]`` a detected line (N, >=2) lies within tolerance of.
 
     (rho, theta) and (-rho, theta - pi) are the same line, so lines near theta = 0 and theta = pi are compared both
@@ -192,7 +198,7 @@ def truth_matches(lines: np.ndarray, truth: np.ndarray, rho_tol: float = 3.0, th
     return (direct | flipped).any(axis=0)
 
 
-def median_seconds(fn, repeats: int = 5, warmup: int = 1) -> float:
+def median_seconds(fn, repeats: int = _LINES.repeats, warmup: int = 1) -> float:
     """Median wall time of ``fn()`` over ``repeats`` calls after ``warmup`` untimed calls, in seconds.
 
     Examples

@@ -38,6 +38,11 @@ from ..params import HoughLinesParams, section_or_default
 __all__ = ["HoughGrid", "hough_grid", "hough_accumulator", "hough_lines", "hough_lines_opencv", "IMPLEMENTATIONS",
            "get_impl", "hough_steps", "detect_lines"]
 
+#: the ``hough.lines`` defaults: the one declaration of the accumulator defaults below (theta in radians, the one
+#: conversion of a default; :func:`hough_steps` converts a given section)
+_LINES = HoughLinesParams()
+_THETA = math.radians(_LINES.theta_deg)
+
 
 # ------------------------------------------------------------------------------------------------- validation
 
@@ -113,7 +118,7 @@ class HoughGrid:
 
 
 def hough_grid(
-    shape: tuple[int, int], rho: float = 1.0, theta: float = np.pi / 180, min_theta: float = 0.0,
+    shape: tuple[int, int], rho: float = _LINES.rho, theta: float = _THETA, min_theta: float = 0.0,
     max_theta: float = np.pi,
 ) -> HoughGrid:
     """Accumulator geometry of ``cv2.HoughLines`` for an image of ``shape`` (H, W).
@@ -249,14 +254,14 @@ def hough_accumulator(edges: np.ndarray, grid: HoughGrid, parallel: bool | None 
 
 def hough_lines(
     edges: np.ndarray,
-    rho: float = 1.0,
-    theta: float = np.pi / 180,
-    threshold: int = 150,
+    rho: float = _LINES.rho,
+    theta: float = _THETA,
+    threshold: int = _LINES.threshold,
     *,
     min_theta: float = 0.0,
     max_theta: float = np.pi,
     max_lines: int | None = None,
-    refine: bool = False,
+    refine: bool = _LINES.refine,
     parallel: bool | None = None,
 ) -> np.ndarray:
     """Standard Hough transform with the semantics of ``cv2.HoughLines`` (see :mod:`cvpipe.hough.transform`).
@@ -322,7 +327,7 @@ def hough_lines(
 
 
 def hough_lines_opencv(
-    edges: np.ndarray, rho: float = 1.0, theta: float = np.pi / 180, threshold: int = 150, *,
+    edges: np.ndarray, rho: float = _LINES.rho, theta: float = _THETA, threshold: int = _LINES.threshold, *,
     min_theta: float = 0.0, max_theta: float = np.pi,
 ) -> np.ndarray:
     """``cv2.HoughLinesWithAccumulator`` with our validation and output layout ((N, 3) float64, no lines -> (0, 3)).
