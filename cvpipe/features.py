@@ -18,6 +18,9 @@ import numpy as np
 from .errors import BudgetWarning, InputError, memory_budget
 from .params import FeaturesParams, section_or_default
 
+#: the ``homography.features`` defaults: the one declaration of :func:`detect`'s keyword defaults
+_FEATURES = FeaturesParams()
+
 
 def opencv_factory(name: str) -> Callable[..., cv2.Feature2D]:
     """The ``cv2`` constructor ``<name>_create`` wherever this OpenCV build keeps it.
@@ -145,7 +148,7 @@ def detection_scale(shape: tuple[int, ...], detector: str) -> float:
     return scale
 
 
-def detect(gray: np.ndarray, detector: str = "sift", max_features: int = 4000,
+def detect(gray: np.ndarray, detector: str = _FEATURES.detector, max_features: int = _FEATURES.max_features,
            mask: np.ndarray | None = None, min_long_side: int = 0) -> Features:
     """Detect keypoints and compute descriptors.
 

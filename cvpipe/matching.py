@@ -16,6 +16,8 @@ if TYPE_CHECKING:
 
 #: FLANN's randomised KD-tree index
 FLANN_KDTREE = 1
+#: the ``*.match`` defaults: the one declaration of the keyword defaults of :func:`match` and ``MatchIndex.query``
+_MATCH = MatchParams()
 
 
 def flann_matcher() -> cv2.FlannBasedMatcher:
@@ -62,7 +64,7 @@ class MatchIndex:
     def __len__(self) -> int:
         return len(self.desc)
 
-    def query(self, desc_a: np.ndarray, ratio: float = 0.8) -> np.ndarray:
+    def query(self, desc_a: np.ndarray, ratio: float = _MATCH.ratio) -> np.ndarray:
         """Match ``desc_a`` (Na, D) against the index: (M, 2) int64 pairs ``[i_a, i_index]`` passing the ratio
         test, sorted by descriptor distance (best first)."""
         if not 0.0 < float(ratio) <= 1.0:
@@ -93,7 +95,7 @@ def _ratio_pairs(knn: list, ratio: float) -> tuple[np.ndarray, np.ndarray]:
     return np.array(pairs, np.int64).reshape(-1, 2), np.array(dists, np.float32)
 
 
-def match(desc_a: np.ndarray, desc_b: np.ndarray, ratio: float = 0.8, cross_check: bool = False,
+def match(desc_a: np.ndarray, desc_b: np.ndarray, ratio: float = _MATCH.ratio, cross_check: bool = _MATCH.cross_check,
           binary: bool | None = None) -> np.ndarray:
     """Match descriptors of image A to image B.
 

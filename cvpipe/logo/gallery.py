@@ -12,6 +12,10 @@ from ..errors import InputError
 from ..features import DETECTORS, Features, check_detector
 from ..geometry import image_corners
 from ..matching import flann_matcher
+from ..params import LogoMatchParams
+
+#: the ``logo.match`` defaults: the one declaration of :func:`build_gallery`'s ``min_features``
+_MATCH = LogoMatchParams()
 
 
 @dataclass(frozen=True)
@@ -119,7 +123,7 @@ def _strongest(f: Features, n: int) -> Features:
     return Features(f.xy[keep], f.size[keep], f.angle[keep], f.response[keep], f.descriptors[keep], f.detector)
 
 
-def build_gallery(references: Sequence[Reference], min_features: int = 8,
+def build_gallery(references: Sequence[Reference], min_features: int = _MATCH.min_features,
                   max_features: int | None = None) -> Gallery:
     """Index the references of every brand once.
 
