@@ -5,6 +5,7 @@ The range, choice and cross-field cases are generated from the models' own const
 section is tested by declaring it."""
 
 import dataclasses
+import inspect
 import re
 import typing
 from typing import Annotated, Literal, Optional
@@ -151,6 +152,122 @@ def test_params_yaml_agrees_with_model_defaults(repo_root):
         assert loaded == cls(), f"params.yaml section {section} differs from {cls.__name__} defaults"
         assert set(node) == set(cls.model_fields), f"{section}: keys differ from {cls.__name__}"
     assert load_inspect_params(repo_root / "params.yaml") == InspectParams()
+
+
+def _mirrored_defaults():
+    """Every library keyword default that is a params field, in one table: (function, {parameter: (model, field,
+    unit conversion or None)}). A function listed here must take the default from the model, never repeat it."""
+    import importlib
+    import math
+
+    import numpy as np
+
+    from cvpipe import features, homography, hough, matching, stereo
+    from cvpipe.params import (FeaturesParams, HomographyEstimateParams, HomographyReportParams, HoughEdgesParams,
+                               HoughReportParams, LogoMatchParams, StereoBmParams, StereoDepthParams,
+                               StereoRectifyParams, StereoReportParams, StereoSgbmParams)
+
+    # the modules themselves (a package re-exports functions under some of these names, e.g. `estimate`)
+    estimate, homography_report, gallery, epipolar, pipeline, rectify, stereo_report = (
+        importlib.import_module(f"cvpipe.{name}") for name in (
+            "homography.estimate", "homography.report", "logo.gallery", "stereo.epipolar", "stereo.pipeline",
+            "stereo.rectify", "stereo.report"))
+
+    def same(model, *names):
+        return {name: (model, name, None) for name in names}
+
+    est = same(HomographyEstimateParams, "threshold", "confidence", "max_iters")
+    rho = same(HoughLinesParams, "rho")
+    theta = {"theta": (HoughLinesParams, "theta_deg", math.radians)}  # the accumulator takes radians, like cv2
+    lines = {**rho, **theta, **same(HoughLinesParams, "threshold")}
+    rect = same(StereoRectifyParams, "threshold", "margin")
+    return [
+        (stereo.disparity_sgm, same(StereoSgmParams, *StereoSgmParams.model_fields)),
+        (stereo.disparity_opencv_bm, same(StereoBmParams, *StereoBmParams.model_fields)),
+        (stereo.disparity_opencv_sgbm, same(StereoSgbmParams, *StereoSgbmParams.model_fields)),
+        (stereo.compute_disparity, same(StereoDepthParams, "method")),
+        (estimate.find_homography, est),
+        (estimate.METHODS["opencv_ransac"], est),
+        (estimate.METHODS["opencv_magsac"], est),
+        (homography.correspondences, {**same(FeaturesParams, "detector", "max_features"),
+                                      **same(MatchParams, "ratio", "cross_check")}),
+        (homography_report.compare_methods, same(HomographyReportParams, "success_px")),
+        (homography_report.alignment_checkerboard, {"tiles": (HomographyReportParams, "checker_tiles", None)}),
+        (hough.canny_edges, {"low": (HoughEdgesParams, "canny_low", None),
+                             "high": (HoughEdgesParams, "canny_high", None),
+                             **same(HoughEdgesParams, "aperture", "l2_gradient", "blur_sigma")}),
+        (hough.hough_grid, {**rho, **theta}),
+        (hough.hough_lines, {**lines, **same(HoughLinesParams, "refine")}),
+        (hough.hough_lines_opencv, lines),
+        (hough.line_cells, {**rho, **theta}),
+        (hough.cell_agreement, {**rho, **theta}),
+        (hough.truth_matches, {**same(HoughReportParams, "rho_tol"),
+                               "theta_tol": (HoughReportParams, "theta_tol_deg", np.deg2rad)}),
+        (hough.median_seconds, same(HoughLinesParams, "repeats")),
+        (matching.match, same(MatchParams, "ratio", "cross_check")),
+        (matching.MatchIndex.query, same(MatchParams, "ratio")),
+        (features.detect, same(FeaturesParams, "detector", "max_features")),
+        (epipolar.find_fundamental, same(StereoRectifyParams, "threshold")),
+        (rectify.rectifying_homographies, same(StereoRectifyParams, "margin")),
+        (rectify.rectify_uncalibrated, rect),
+        (rectify.opencv_uncalibrated, same(StereoRectifyParams, "threshold")),
+        (rectify.rectify_calibrated, same(StereoRectifyParams, "margin")),
+        (pipeline.feature_matches, same(StereoRectifyParams, "detector", "max_features", "ratio", "seed")),
+        (pipeline.rectify_pair, {**rect, **same(StereoRectifyParams, "seed", "rectified_max_dy",
+                                                "rectified_share")}),
+        (stereo_report.comparison_picture, same(StereoReportParams, "error_clip")),
+        (gallery.build_gallery, same(LogoMatchParams, "min_features")),
+    ]
+
+
+def test_function_defaults_are_the_model_defaults():
+    """The keyword defaults of the library functions are the models' own default objects (declared once, on the
+    field): a signature cannot disagree with the model or params.yaml because it does not declare a value."""
+    from cvpipe import homography
+    from cvpipe.params import HomographyEstimateParams
+
+    for fn, mirrored in _mirrored_defaults():
+        sig = inspect.signature(fn).parameters
+        for name, (model, field, convert) in mirrored.items():
+            declared = model.model_fields[field].default
+            got = sig[name].default
+            if convert is None:
+                assert got is declared, f"{fn.__qualname__}({name}=...) is not {model.__name__}.{field}"
+            else:  # a unit conversion of the field's default (degrees -> radians), computed from it
+                want = convert(declared)
+                assert got == want and type(got) is type(want), f"{fn.__qualname__}({name}=...)"
+    assert homography.DEFAULT_MAX_ITERS is HomographyEstimateParams.model_fields["max_iters"].default
+
+
+def test_function_defaults_repeat_no_literal():
+    """No function of the table writes a mirrored default as a literal: each one reads the model (``_SGM.p1``), or
+    a module constant computed from the field (``_THETA = math.radians(_LINES.theta_deg)``)."""
+    import ast
+    import sys
+    import textwrap
+
+    for fn, mirrored in _mirrored_defaults():
+        node = ast.parse(textwrap.dedent(inspect.getsource(fn))).body[0]
+        args = node.args
+        positional = args.posonlyargs + args.args
+        defaults = dict(zip([a.arg for a in positional[len(positional) - len(args.defaults):]], args.defaults))
+        defaults.update({a.arg: d for a, d in zip(args.kwonlyargs, args.kw_defaults) if d is not None})
+        module = ast.parse(inspect.getsource(sys.modules[fn.__module__]))
+        constants = {t.id: ast.unparse(n.value) for n in module.body if isinstance(n, ast.Assign)
+                     for t in ast.walk(n.targets[0]) if isinstance(t, ast.Name)}
+        for name, (model, field, convert) in mirrored.items():
+            text = ast.unparse(defaults[name])
+            where = f"{fn.__module__}.{fn.__qualname__}({name}={text})"
+            try:
+                ast.literal_eval(defaults[name])
+            except ValueError:  # not a literal: good
+                pass
+            else:
+                pytest.fail(f"{where} repeats a literal; read {model.__name__}.{field} instead")
+            if convert is None:
+                assert isinstance(defaults[name], ast.Attribute) and defaults[name].attr == field, where
+            else:
+                assert isinstance(defaults[name], ast.Name) and f".{field}" in constants[defaults[name].id], where
 
 
 def test_detector_choices_are_the_registry():

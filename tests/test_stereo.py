@@ -1,7 +1,6 @@
 """cvpipe.stereo: semi-global matching on random-dot pairs with a known disparity field, the OpenCV wrappers, the
 dense-map metrics, validation messages, the `cvpipe stereo` command and (with CVPIPE_DATA) one Middlebury pair."""
 
-import inspect
 import json
 import os
 from pathlib import Path
@@ -11,7 +10,6 @@ import numpy as np
 import pytest
 
 from cvpipe import cli, io, metrics, stereo
-from cvpipe.params import StereoBmParams, StereoSgbmParams, StereoSgmParams
 
 MAX_DISP = 24
 
@@ -193,15 +191,6 @@ def test_opencv_and_registry_validation():
         stereo.disparity_opencv_sgbm(g, g, 16, mode="fast")
     with pytest.raises(ValueError, match=r"`method` must be one of \['opencv_bm', 'opencv_sgbm', 'sgm'\]"):
         stereo.compute_disparity(g, g, 16, "census")
-
-
-def test_params_defaults_match_the_functions():
-    """The params models are the declared defaults; the library functions must not drift from them."""
-    for cls, fn in ((StereoSgmParams, stereo.disparity_sgm), (StereoBmParams, stereo.disparity_opencv_bm),
-                    (StereoSgbmParams, stereo.disparity_opencv_sgbm)):
-        sig = inspect.signature(fn).parameters
-        for name, f in cls.model_fields.items():
-            assert sig[name].default == f.default, (cls.__name__, name)
 
 
 # ----------------------------------------------------------------------------------------------- results
