@@ -71,19 +71,10 @@ def disparity_sgm(
     right: np.ndarray,
     max_disp: int,
     *,
-    census_size: tuple[int, int] = _SGM.census_size,
-    ad_weight: float = _SGM.ad_weight,
-    ad_trunc: int = _SGM.ad_trunc,
-    paths: int = _SGM.paths,
-    p1: int = _SGM.p1,
-    p2: int = _SGM.p2,
-    p2_tau: float = _SGM.p2_tau,
-    uniqueness: float = _SGM.uniqueness,
-    subpixel: bool = _SGM.subpixel,
-    lr_max_diff: float = _SGM.lr_max_diff,
-    speckle_size: int = _SGM.speckle_size,
-    speckle_range: float = _SGM.speckle_range,
-    fill: bool = _SGM.fill,
+    census_size: tuple[int, int] = _SGM.census_size, ad_weight: float = _SGM.ad_weight, ad_trunc: int = _SGM.ad_trunc,
+    paths: int = _SGM.paths, p1: int = _SGM.p1, p2: int = _SGM.p2, p2_tau: float = _SGM.p2_tau,
+    uniqueness: float = _SGM.uniqueness, subpixel: bool = _SGM.subpixel, lr_max_diff: float = _SGM.lr_max_diff,
+    speckle_size: int = _SGM.speckle_size, speckle_range: float = _SGM.speckle_range, fill: bool = _SGM.fill,
 ) -> np.ndarray:
     """Disparity of the left image by semi-global matching on a census cost.
 
