@@ -15,6 +15,9 @@ import numpy as np
 
 from .params import SamplesParams, section_or_default
 
+#: the ``samples`` defaults: the one declaration of :func:`make_logo`'s scene counts
+_SAMPLES = SamplesParams()
+
 #: gallery brands (simple-icons slugs, CC0 marks with enough shape detail for local features)
 LOGO_BRANDS = ("starbucks", "raspberrypi", "linux", "redbull", "ferrari",
                "porsche", "lamborghini", "cocacola", "unilever", "docker")
@@ -136,8 +139,8 @@ def random_view(rng: np.random.Generator, size: float, center: tuple[float, floa
 # ----------------------------------------------------------------------------------------------------- tasks
 
 
-def make_logo(rng: np.random.Generator, n_scenes: int = 40, n_negatives: int = 12,
-              width: int = 640, height: int = 480) -> SampleSet:
+def make_logo(rng: np.random.Generator, n_scenes: int = _SAMPLES.logo_scenes,
+              n_negatives: int = _SAMPLES.logo_negatives, width: int = 640, height: int = 480) -> SampleSet:
     """A 10-brand gallery and scenes with one mark each (known quad) plus scenes with no gallery mark."""
     out = SampleSet()
     gallery = {b: render_mark(b) for b in LOGO_BRANDS}

@@ -163,15 +163,16 @@ def _mirrored_defaults():
     import numpy as np
 
     from cvpipe import features, homography, hough, matching, stereo
-    from cvpipe.params import (FeaturesParams, HomographyEstimateParams, HomographyReportParams, HoughEdgesParams,
-                               HoughReportParams, LogoMatchParams, StereoBmParams, StereoDepthParams,
-                               StereoRectifyParams, StereoReportParams, StereoSgbmParams)
+    from cvpipe.params import (DefectDiffParams, FeaturesParams, HomographyEstimateParams, HomographyReportParams,
+                               HoughEdgesParams, HoughReportParams, LogoMatchParams, LogoVerifyParams, SamplesParams,
+                               StereoBmParams, StereoDepthParams, StereoRectifyParams, StereoReportParams,
+                               StereoSgbmParams)
 
     # the modules themselves (a package re-exports functions under some of these names, e.g. `estimate`)
-    estimate, homography_report, gallery, epipolar, pipeline, rectify, stereo_report = (
+    estimate, homography_report, gallery, verify, diff, epipolar, pipeline, rectify, stereo_report, samples = (
         importlib.import_module(f"cvpipe.{name}") for name in (
-            "homography.estimate", "homography.report", "logo.gallery", "stereo.epipolar", "stereo.pipeline",
-            "stereo.rectify", "stereo.report"))
+            "homography.estimate", "homography.report", "logo.gallery", "logo.verify", "defect.diff",
+            "stereo.epipolar", "stereo.pipeline", "stereo.rectify", "stereo.report", "samples"))
 
     def same(model, *names):
         return {name: (model, name, None) for name in names}
@@ -193,6 +194,7 @@ def _mirrored_defaults():
                                       **same(MatchParams, "ratio", "cross_check")}),
         (homography_report.compare_methods, same(HomographyReportParams, "success_px")),
         (homography_report.alignment_checkerboard, {"tiles": (HomographyReportParams, "checker_tiles", None)}),
+        (homography_report.alignment_panel, {"tiles": (HomographyReportParams, "checker_tiles", None)}),
         (hough.canny_edges, {"low": (HoughEdgesParams, "canny_low", None),
                              "high": (HoughEdgesParams, "canny_high", None),
                              **same(HoughEdgesParams, "aperture", "l2_gradient", "blur_sigma")}),
@@ -212,10 +214,16 @@ def _mirrored_defaults():
         (rectify.rectify_uncalibrated, rect),
         (rectify.opencv_uncalibrated, same(StereoRectifyParams, "threshold")),
         (rectify.rectify_calibrated, same(StereoRectifyParams, "margin")),
+        (rectify.looks_rectified, {"max_dy": (StereoRectifyParams, "rectified_max_dy", None)}),
         (pipeline.feature_matches, same(StereoRectifyParams, "detector", "max_features", "ratio", "seed")),
         (pipeline.rectify_pair, {**rect, **same(StereoRectifyParams, "seed", "rectified_max_dy",
                                                 "rectified_share")}),
         (stereo_report.comparison_picture, same(StereoReportParams, "error_clip")),
+        (stereo_report.error_picture, {"clip": (StereoReportParams, "error_clip", None)}),
+        (diff.fit_gain_bias, {"trim": (DefectDiffParams, "fit_trim", None)}),
+        (verify.affine_ransac, {"hypotheses": (LogoVerifyParams, "affine_samples", None)}),
+        (samples.make_logo, {"n_scenes": (SamplesParams, "logo_scenes", None),
+                             "n_negatives": (SamplesParams, "logo_negatives", None)}),
         (gallery.build_gallery, same(LogoMatchParams, "min_features")),
     ]
 

@@ -11,6 +11,9 @@ from ..errors import EstimationError, InputError
 from ..params import DefectDiffParams
 from ._util import check_gray, disc
 
+#: the ``defect.diff`` defaults: the one declaration of :func:`fit_gain_bias`'s ``trim``
+_DIFF = DefectDiffParams()
+
 
 @dataclass(frozen=True)
 class Difference:
@@ -53,7 +56,7 @@ class Difference:
         return {k: getattr(self, k) for k in ("gain", "bias", "noise", "contrast")}
 
 
-def fit_gain_bias(reference: np.ndarray, warped: np.ndarray, valid: np.ndarray, trim: float = 3.0,
+def fit_gain_bias(reference: np.ndarray, warped: np.ndarray, valid: np.ndarray, trim: float = _DIFF.fit_trim,
                   iterations: int = 4, max_samples: int = 40_000) -> tuple[float, float, float]:
     """Robust fit of ``warped ~= gain * reference + bias`` over ``valid`` pixels.
 

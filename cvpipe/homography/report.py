@@ -65,7 +65,7 @@ def alignment_checkerboard(img_a: np.ndarray, img_b: np.ndarray, H_ab, tiles: in
     return out.astype(np.uint8)
 
 
-def alignment_panel(img_a: np.ndarray, img_b: np.ndarray, panels: dict, tiles: int = 8,
+def alignment_panel(img_a: np.ndarray, img_b: np.ndarray, panels: dict, tiles: int = _REPORT.checker_tiles,
                     width: int = 400) -> np.ndarray:
     """Side-by-side :func:`alignment_checkerboard` pictures, one per labelled homography.
 

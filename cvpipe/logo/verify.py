@@ -17,6 +17,9 @@ from ..geometry import apply_homography as _map_points
 from ..homography import find_homography
 from ..params import LogoVerifyParams
 
+#: the ``logo.verify`` defaults: the one declaration of :func:`affine_ransac`'s ``hypotheses``
+_VERIFY = LogoVerifyParams()
+
 if TYPE_CHECKING:
     from .gallery import Gallery, Reference
     from .match import Matches
@@ -181,7 +184,7 @@ def pose_probability(angle_tolerance: float, scale_tolerance: float) -> float:
     return min(1.0, angle_tolerance / 180.0) * min(1.0, 2.0 * np.log(scale_tolerance) / np.log(16.0))
 
 
-def affine_ransac(src: np.ndarray, dst: np.ndarray, threshold: float, hypotheses: int = 500,
+def affine_ransac(src: np.ndarray, dst: np.ndarray, threshold: float, hypotheses: int = _VERIFY.affine_samples,
                   rng=None, src_pose: np.ndarray | None = None, dst_pose: np.ndarray | None = None,
                   angle_tolerance: float = 180.0, scale_tolerance: float = 1e9) -> tuple[np.ndarray, np.ndarray]:
     """Robust affine map from putative correspondences: RANSAC over 3-point samples, evaluated all at once.

@@ -492,7 +492,7 @@ def max_disp_from_matches(pts1, pts2, max_dy: float = 1.5) -> int:
     return _max_disp(robust_disparity_range(d)[1])
 
 
-def looks_rectified(pts1, pts2, max_dy: float = 1.0, share: float = 0.9) -> bool:
+def looks_rectified(pts1, pts2, max_dy: float = _RECTIFY.rectified_max_dy, share: float = 0.9) -> bool:
     """Whether a pair is already rectified: at least ``share`` of its matches lie within ``max_dy`` px of the same
     row (a stage can then skip rectification, which makes it a no-op for rectified pairs).
 

@@ -13,7 +13,7 @@ from . import depth as depth_mod
 
 #: bad-pixel thresholds in pixels used by the stages and the benchmark (Middlebury's bad-1.0 and bad-2.0)
 BAD_THRESHOLDS = (1.0, 2.0)
-#: the ``stereo.report`` defaults: the one declaration of :func:`comparison_picture`'s ``error_clip``
+#: the ``stereo.report`` defaults: the one declaration of the ``error_clip`` / ``clip`` defaults below
 _REPORT = StereoReportParams()
 
 
@@ -67,7 +67,7 @@ def colorize_disparity(disp: np.ndarray, max_disp: float) -> np.ndarray:
     return pic
 
 
-def error_picture(disp: np.ndarray, truth: np.ndarray, clip: float = 4.0) -> np.ndarray:
+def error_picture(disp: np.ndarray, truth: np.ndarray, clip: float = _REPORT.error_clip) -> np.ndarray:
     """(H, W, 3) uint8 BGR map of |disp - truth|: black (0) to white (>= ``clip`` px) on a hot scale; missing
     estimates with known truth in blue, unknown truth in mid grey."""
     if disp.shape != truth.shape:
