@@ -4,8 +4,10 @@ Each stage's parameters are one model (a :class:`Section`) whose field names are
 ``params.yaml`` section. Every default, range and choice is declared once, on its field: ``Field(ge=..., le=...)``
 for a range (a range that several sections share once, as a named type such as :data:`Ratio`), ``Literal[...]`` for
 a choice, and :class:`Bound` for a limit set by another field of the same section (``canny_high`` >= ``canny_low``).
-The CLI reuses the defaults; a test checks that ``params.yaml`` agrees, and the message tests are generated from
-these declarations. Unknown, mistyped or out-of-range keys are refused with an
+The CLI reuses the defaults, and a library function's keyword default that is a field reads it from a module-level
+instance (``p1: int = _SGM.p1``) instead of repeating it; tests check that ``params.yaml`` agrees and that no such
+signature holds a literal, and the message tests are generated from these declarations. Unknown, mistyped or
+out-of-range keys are refused with an
 :class:`~cvpipe.errors.InputError` of one line that names the dotted key and what it accepts (```hough.lines.rho`
 must be in (0.0, 100.0], got -1``); the same check runs when Python code builds a model directly, and the message
 then names the bare field. Types are strict: ``true`` and ``"3"`` are not numbers, ``3.0`` is not an integer, but
