@@ -44,16 +44,9 @@ EXAMPLE = "cvpipe hough data/samples/hough/synthetic_grid.png --threshold 100 --
 
 
 def _load(package: str, names: dict[str, str]) -> dict[str, ModuleType]:
-    """Import the command modules that exist; a task that has not landed yet is simply not offered."""
-    found = {}
-    for name, module in names.items():
-        full = f"{package}.{module}"
-        try:
-            found[name] = importlib.import_module(full)
-        except ModuleNotFoundError as exc:
-            if exc.name != full:
-                raise
-    return found
+    """Import every module of ``names`` (name -> module in ``package``); a missing one is an error, not a hidden
+    command."""
+    return {name: importlib.import_module(f"{package}.{module}") for name, module in names.items()}
 
 
 def module_constants(full: str, names: tuple[str, ...] = ("HELP", "EXAMPLE")) -> dict[str, str] | None:

@@ -10,8 +10,9 @@
 
 Items travel with their data: ``fn(item, shared)`` receives arrays or bytes, never a path in the caller's working
 directory, because a worker need not see that directory. Each item's data is scattered straight to a worker, in
-batches, never through the scheduler; ``shared`` (a reference image, a gallery) is sent once per worker. Results come back in the input order whatever finished first, so a caller that writes them sequentially
-produces the same bytes in every mode. At most ``window`` items are submitted and not yet yielded at any time, so the
+batches, never through the scheduler; ``shared`` (a reference image, a gallery) is sent once per worker. Results
+come back in the input order whatever finished first, so a caller that writes them sequentially produces the same
+bytes in every mode. At most ``window`` items are submitted and not yet yielded at any time, so the
 memory of a run over 10^4 items does not grow with the number of items, provided ``items`` is a lazy iterable.
 
 An item whose function raises is reported as a failed :class:`ItemResult` with the exception's message and never

@@ -4,8 +4,8 @@ DeepPCB's pairs are pixel-aligned, binarised and every test image is faulty. Eac
 the test image (faulty) and the template itself (perfect), each warped by its own seeded small random homography
 (rotation up to 4 degrees, scale +-5 %, translation up to 15 px, slight perspective) with a gain/bias change, blur and
 noise. The ground-truth boxes are mapped by the same homography. Ours (:func:`cvpipe.defect.inspect`) is compared
-in the same process with the seed's method (SIFT + OpenCV RANSAC homography, plain absolute difference, fixed
-threshold, connected components).
+in the same process with the baseline, the seed project's method (SIFT + OpenCV RANSAC homography, plain absolute
+difference, fixed threshold, connected components).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ if typing.TYPE_CHECKING:  # annotations only: the modules are imported inside th
     import numpy as np
 
 
-HELP = "defect inspection on DeepPCB pairs warped by random homographies (ours vs the seed's plain difference)"
+HELP = "defect inspection on DeepPCB pairs warped by random homographies (ours vs the seed project's plain difference)"
 EXAMPLE = "cvpipe bench defect --data ../shared/data --limit 20"
 
 IOU = 0.33  # DeepPCB's criterion
@@ -45,7 +45,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"box padding in px for DeepPCB's loose boxes (default {DEEPPCB_PAD:g})")
     parser.add_argument("--detector", help="keypoint detector for registration (default: defect.features)")
     parser.add_argument("--max-features", type=int, help="keypoints per image (default: defect.features)")
-    parser.add_argument("--no-baseline", action="store_true", help="skip the seed's method")
+    parser.add_argument("--no-baseline", action="store_true", help="skip the baseline (the seed project's method)")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
     parser.add_argument("--out", help="write results JSON here as well")
 
@@ -130,9 +130,10 @@ def make_probe(img: np.ndarray, boxes: np.ndarray, rng: np.random.Generator) -> 
 # --------------------------------------------------------------------------------------------------- baseline
 
 
-def seed_method(reference: np.ndarray, probe: np.ndarray, ref_feats, threshold: float = 50.0,
+def baseline_method(reference: np.ndarray, probe: np.ndarray, ref_feats, threshold: float = 50.0,
                 min_area: int = 12) -> np.ndarray:
-    """The seed's inspection: SIFT + cv2.findHomography, warp, ``cv2.absdiff``, fixed threshold, components.
+    """The baseline, the seed project's inspection: SIFT + cv2.findHomography, warp, ``cv2.absdiff``, fixed
+    threshold, components.
 
     ``ref_feats`` are the reference's SIFT features. Returns the regions (K, 4) in probe pixels; raises
     ``CvpipeError`` when registration fails.
@@ -178,7 +179,8 @@ def _score(counts: dict, verdicts: list[tuple[str, str]]) -> dict:
 
 def evaluate(pairs: list[dict], seed: int, params: InspectParams, baseline: bool = True,
              progress: bool | None = None) -> dict:
-    """Run ours (and the seed's method) on both probes of every pair; return metrics and timings."""
+    """Run ours (and the baseline, the seed project's method) on both probes of every pair; return metrics and
+    timings."""
     import numpy as np
     from tqdm import tqdm
     from .. import defect, io
@@ -187,10 +189,10 @@ def evaluate(pairs: list[dict], seed: int, params: InspectParams, baseline: bool
 
     pad = params.regions.pad
     tight = replace(params.regions, pad=0.0)
-    names = ["ours", "ours_tight_boxes"] + (["seed"] if baseline else [])
+    names = ["ours", "ours_tight_boxes"] + (["baseline"] if baseline else [])
     counts = {k: DetectionCounts(0, 0, 0) for k in names}
     verdicts = {k: [] for k in names}
-    times = {"ours": [], "seed": [], "reference_features": []}
+    times = {"ours": [], "baseline": [], "reference_features": []}
     failures, n_direct, records = [], 0, []
     for k, pair in enumerate(tqdm(pairs, desc="defect", disable=progress)):
         rng = np.random.default_rng([seed, k])
@@ -199,7 +201,7 @@ def evaluate(pairs: list[dict], seed: int, params: InspectParams, baseline: bool
         t0 = time.perf_counter()
         fr = detect(ref, params.features.detector, params.features.max_features)
         times["reference_features"].append(time.perf_counter() - t0)
-        fr_seed = detect(ref, "sift", 4000) if baseline else None
+        fr_baseline = detect(ref, "sift", 4000) if baseline else None
         for truth_verdict, src, boxes in (("faulty", test, pair["boxes"]), ("perfect", ref, np.zeros((0, 4)))):
             probe, H, gt = make_probe(src, boxes, rng)
             t0 = time.perf_counter()
@@ -226,17 +228,17 @@ def evaluate(pairs: list[dict], seed: int, params: InspectParams, baseline: bool
             if baseline:
                 t0 = time.perf_counter()
                 try:
-                    boxes_seed = seed_method(ref, probe, fr_seed)
-                    times["seed"].append(time.perf_counter() - t0)
-                    verdicts["seed"].append((truth_verdict, "faulty" if len(boxes_seed) else "perfect"))
-                    counts["seed"] += match_boxes(boxes_seed, gt, IOU)[0]
+                    boxes_baseline = baseline_method(ref, probe, fr_baseline)
+                    times["baseline"].append(time.perf_counter() - t0)
+                    verdicts["baseline"].append((truth_verdict, "faulty" if len(boxes_baseline) else "perfect"))
+                    counts["baseline"] += match_boxes(boxes_baseline, gt, IOU)[0]
                 except CvpipeError:
-                    times["seed"].append(time.perf_counter() - t0)
-                    verdicts["seed"].append((truth_verdict, "error"))
-                    counts["seed"] += DetectionCounts(0, 0, len(gt))
+                    times["baseline"].append(time.perf_counter() - t0)
+                    verdicts["baseline"].append((truth_verdict, "error"))
+                    counts["baseline"] += DetectionCounts(0, 0, len(gt))
     results = {name: _score(counts[name], verdicts[name]) for name in names}
     for name in results:
-        key = "seed" if name == "seed" else "ours"
+        key = "baseline" if name == "baseline" else "ours"
         results[name]["median_s_per_probe"] = statistics.median(times[key]) if times[key] else None
     return {"pairs": len(pairs), "probes": 2 * len(pairs), "iou": IOU, "pad": pad, "seed": seed,
             "detector": params.features.detector, "max_features": params.features.max_features,
@@ -281,9 +283,9 @@ def run(args: argparse.Namespace) -> int:
               f"{m['median_s_per_probe']:8.3f}")
     print(f"registration: {res['detector']} x {res['max_features']}, {res['direct_registrations']} probes aligned "
           f"directly (keypoints gave no homography, or the direct start aligned better)")
-    if "seed" in res["methods"]:
-        ratio = res["methods"]["seed"]["median_s_per_probe"] / res["methods"]["ours"]["median_s_per_probe"]
-        print(f"time per probe, seed / ours (same process, interleaved): {ratio:.2f}")
+    if "baseline" in res["methods"]:
+        ratio = res["methods"]["baseline"]["median_s_per_probe"] / res["methods"]["ours"]["median_s_per_probe"]
+        print(f"time per probe, baseline / ours (same process, interleaved): {ratio:.2f}")
     print(f"reference features (once per reference): {res['reference_features_median_s']:.3f} s median")
     for f in res["failures"]:
         print(f"  registration failed: {f['pair']} {f['probe']}: {f['error']}")

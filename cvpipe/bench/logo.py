@@ -321,7 +321,8 @@ def _print_several(res: dict) -> None:
 
 
 def _summarise(ev: dict) -> None:
-    """Add the two operating points of the issue's target to an :func:`cvpipe.logo.evaluate` result."""
+    """Add the two operating points of the logo target (precision >= 0.95 at recall >= 0.70, BENCHMARKS "logo") to an
+    :func:`cvpipe.logo.evaluate` result."""
     ev["best_precision_at_recall_0.70"] = max((c["precision"] for c in ev["curve"] if c["recall"] >= 0.70),
                                               default=None)
     ev["best_recall_at_precision_0.95"] = max((c["recall"] for c in ev["curve"] if c["precision"] >= 0.95),

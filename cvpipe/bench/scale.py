@@ -11,8 +11,9 @@ process (numba and OpenCV with their own threads), ``LocalCluster`` with 1 and w
 external ``dask scheduler`` with 2 ``dask worker --nthreads 1`` processes on 127.0.0.1, and ``kill2``: its own
 external cluster of 2 workers of which one is killed (SIGKILL) when half of the probes are done, so that the time a
 lost worker costs shows against ``external2`` (the rates before and after the kill, and the whole run's time).
-The results of every mode are hashed and must agree. The scheduler's per-item overhead is the latency of an empty task, submitted one at a
-time (median and p95), and the rate of empty tasks through :func:`cvpipe.compute.map_items`.
+The results of every mode are hashed and must agree. The scheduler's per-item overhead is the latency of an empty
+task, submitted one at a time (median and p95), and the rate of empty tasks through
+:func:`cvpipe.compute.map_items`.
 """
 
 from __future__ import annotations

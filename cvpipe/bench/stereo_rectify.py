@@ -218,7 +218,8 @@ def run_rectify(args: argparse.Namespace, pairs: dict) -> int:
         return r["pair"] if n_seeds == 1 else f"{r['pair']}@{r['seed']}"
 
     summary = {
-        "pairs": [key(r) for r in rows], "seed": args.seed, "seeds": n_seeds, "repeats": args.repeats, "threshold_px": THRESHOLD,
+        "pairs": [key(r) for r in rows], "seed": args.seed, "seeds": n_seeds, "repeats": args.repeats,
+        "threshold_px": THRESHOLD,
         "first_call_s": warm, "targets": TARGETS, "load_average_1min": os.getloadavg()[0],
         "median_ok": {key(r): r["vertical_median_px_ours"] <= TARGETS["median_px"] for r in rows},
         "p95_ok": {key(r): r["vertical_p95_px_ours"] <= TARGETS["p95_px"] for r in rows},
@@ -233,7 +234,8 @@ def run_rectify(args: argparse.Namespace, pairs: dict) -> int:
         "p95_not_worse": {key(r): bool(r["vertical_p95_px_ours"] <= r["vertical_p95_px_opencv"]) for r in rows},
         "mean_vertical_median_px": {m: float(np.mean([r[f"vertical_median_px_{m}"] for r in rows]))
                                     for m in ("ours", "opencv")},
-        "mean_vertical_p95_px": {m: float(np.mean([r[f"vertical_p95_px_{m}"] for r in rows])) for m in ("ours", "opencv")},
+        "mean_vertical_p95_px": {m: float(np.mean([r[f"vertical_p95_px_{m}"] for r in rows]))
+                                 for m in ("ours", "opencv")},
     }
     if args.json:
         print(io.dumps_json({"summary": summary, "rows": rows}))

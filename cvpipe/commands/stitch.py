@@ -71,7 +71,7 @@ def _compose_within_budget(images: list, compose_megapix: float) -> float:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from .. import homography, io, linalg
+    from .. import _kernels as shared_kernels, homography, io
     from ..errors import EstimationError, InputError
     from ..panorama import _kernels, stitch
 
@@ -104,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
                           gain_block=args.gain_block))
     except ValueError as exc:
         raise InputError(with_flags(str(exc), _HINTED + ("ratio", "compose_megapix", "gain_block"))) from exc
-    compile_note("panorama", homography, linalg, _kernels)
+    compile_note("panorama", homography, shared_kernels, _kernels)
     try:
         with step(f"stitch {len(images)} images"):
             pano = stitch(images, **params, crop=not args.no_crop, rng=args.seed,
