@@ -393,15 +393,16 @@ def _wait_some(client, futures: list) -> list:
     ComputeError
         The client lost its scheduler while waiting.
     """
+    from concurrent.futures import CancelledError
+
     from distributed import wait
 
     while True:
-        try:
+        # a timeout means nothing finished in this round; recent versions raise a CancelledError subclass when a
+        # future was cancelled (its data was lost with a worker): that future counts as finished, and the caller
+        # resubmits it
+        with contextlib.suppress(TimeoutError, CancelledError):
             wait(futures, timeout=POLL, return_when="FIRST_COMPLETED")
-        except TimeoutError:
-            pass
-        except Exception:  # noqa: BLE001 - recent versions raise when a future was cancelled (its data was lost
-            pass  # with a worker); that future is finished for us, and is resubmitted by the caller
         finished = [f for f in futures if f.status != "pending"]
         if finished:
             return finished
