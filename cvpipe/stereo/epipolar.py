@@ -14,7 +14,8 @@ pair to the epipolar variety, in pixels) is at most ``threshold``. The pipeline 
 3. every so-far-best model is refitted by the normalized 8-point algorithm on its inliers (local optimization);
 4. the final model is refitted on its inliers by iteratively reweighted 8-point least squares, whose weights
    turn the algebraic error into the Sampson distance, with the rank-2 constraint enforced by SVD after each round,
-   then over every correspondence within twice the threshold with Tukey weights. With little depth variation the
+   then over every correspondence with Tukey weights whose cut-off is 4.685 times the inliers' noise scale (a
+   robust estimate from the median Sampson distance, at most twice the threshold). With little depth variation the
    cost is nearly flat along the epipole's distance and this refinement has several basins, so it starts from
    several RANSAC models (the last so-far-best ones and the lowest-cost ones of the run) and keeps the lowest cost;
 5. degeneracy checks: too few correspondences or inliers, every point on one line, and inliers that one
@@ -48,9 +49,16 @@ _RANK_EPS = 1e-9
 _ALL_COLLINEAR_EPS = 1e-6
 #: rounds of Sampson-reweighted 8-point refitting of the final model
 _REFINE_ROUNDS = 10
-#: the final refit weighs every correspondence by Tukey's biweight with this cut-off (in units of the threshold),
-#: as the homography's final refinement does: real matches have heavier tails than the threshold assumes
+#: the final refit weighs every correspondence by Tukey's biweight with at most this cut-off (in units of the
+#: threshold), as the homography's final refinement does: real matches have heavier tails than the threshold assumes
 _FINAL_WSCALE = 2.0
+#: ...and within it the cut-off is Tukey's 4.685 sigma (95 % efficiency under Gaussian noise) of the inliers' noise
+#: scale, ``sigma = 1.4826 * median`` of their Sampson distances. SIFT matches are heavy-tailed (on the Middlebury
+#: pairs the 90th percentile of the true residuals is 4 sigma, not 1.6), so a cut-off at the noise scale rather
+#: than at the threshold takes the tail's pull off the fit. ``_MIN_C`` keeps it from collapsing on exact data
+_TUKEY_C = 4.685
+_MAD_TO_SIGMA = 1.4826
+_MIN_C = 0.05
 #: RANSAC models that each get the final refinement (the most recent so-far-best ones and the lowest-cost ones
 #: of the whole run, a few per batch), the lowest final cost wins; and the fewest samples drawn. With little depth
 #: variation the cost is flat along the epipole's distance and the refinement has several basins: on an
@@ -334,15 +342,25 @@ def _refit(x1n, x2n, p1, p2, T1, T2, mask, rounds):
     return _unit(T2.T @ Fn @ T1)
 
 
+def _noise_cutoff(d: np.ndarray, threshold: float) -> float:
+    """Tukey's cut-off ``_TUKEY_C * sigma`` for Sampson distances ``d``, with the noise scale ``sigma`` estimated
+    robustly from the inliers (``1.4826 * median`` of the distances within ``threshold``), kept within
+    ``[_MIN_C, _FINAL_WSCALE] * threshold``."""
+    inl = d[d <= threshold]
+    sigma = _MAD_TO_SIGMA * float(np.median(inl)) if len(inl) else threshold
+    return min(_FINAL_WSCALE * threshold, max(_TUKEY_C * sigma, _MIN_C * threshold))
+
+
 def _refit_robust(x1n, x2n, p1, p2, T1, T2, F, threshold, rounds):
-    """Iteratively reweighted 8-point over every correspondence within ``_FINAL_WSCALE * threshold``: Sampson
-    weights times Tukey's biweight of the Sampson distance, so the result depends smoothly on the inlier set."""
-    c = _FINAL_WSCALE * threshold
+    """Iteratively reweighted 8-point over every correspondence with Sampson weights times Tukey's biweight of the
+    Sampson distance, so the result depends smoothly on the inlier set; the cut-off follows the noise scale of the
+    inliers, re-estimated each round (:func:`_noise_cutoff`)."""
     for _ in range(rounds):
         h1, h2 = _hom(p1), _hom(p2)
         Fx1, Ftx2 = h1 @ F.T, h2 @ F
         den = np.maximum(Fx1[:, 0] ** 2 + Fx1[:, 1] ** 2 + Ftx2[:, 0] ** 2 + Ftx2[:, 1] ** 2, 1e-300)
         d = np.abs((Fx1 * h2).sum(axis=1)) / np.sqrt(den)
+        c = _noise_cutoff(d, threshold)
         use = d < c
         if use.sum() < 8:
             break
@@ -473,6 +491,9 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
             f"{min_inliers}): the views share too little; supply more overlap or raise `threshold`")
     # several starts for the final refinement (see _FINAL_STARTS): keep the lowest final cost
     F, final_cost = None, np.inf
+    # the starts compete on the MSAC cost truncated at the noise cut-off of the RANSAC model, not at the threshold:
+    # with the threshold 5-10x the noise, the tail would decide between nearly equal models
+    sel2 = _noise_cutoff(sampson_distance(best_F, p1, p2), float(threshold)) ** 2
     starts = history[-_FINAL_STARTS:] + [f for _, f in sorted(pool, key=lambda t: t[0])[:_FINAL_STARTS]]
     # a cheap look at each start (two robust rounds), then the full refinement of the two most promising
     quick = []
@@ -481,13 +502,13 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
             q = _refit_robust(x1n, x2n, p1, p2, T1, T2, start, float(threshold), 2)
         except EstimationError:
             continue
-        quick.append((float(_msac_cost(sampson_distance(q, p1, p2), thr2)), q))
+        quick.append((float(_msac_cost(sampson_distance(q, p1, p2), sel2)), q))
     for _, start in sorted(quick, key=lambda t: t[0])[:2]:
         try:
             cand = _finish(x1n, x2n, p1, p2, T1, T2, start, float(threshold), min_inliers)
         except EstimationError:
             continue
-        c = float(_msac_cost(sampson_distance(cand, p1, p2), thr2))
+        c = float(_msac_cost(sampson_distance(cand, p1, p2), sel2))
         if c < final_cost:
             F, final_cost = cand, c
     if F is None:
