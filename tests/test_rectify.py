@@ -303,3 +303,18 @@ def test_robust_disparity_range_ignores_strays():
     assert 5 <= lo < 6 and 47 < hi <= 48
     with pytest.raises(EstimationError, match="no inlier matches"):
         rectify.robust_disparity_range([])
+
+
+def test_robust_disparity_range_drops_a_group_of_strays():
+    # an unrectified Tsukuba draw: three false matches at -6.5, -1.7 and 4.7 px, each within 8 px of the next, below
+    # a scene at 20.6-31.7 px; dropping strays one gap at a time stopped at the first (4.8 px) gap and shifted the
+    # disparities by 20 px
+    rng = np.random.default_rng(5)
+    scene = rng.uniform(20.6, 31.7, 355)
+    lo, hi = rectify.robust_disparity_range(np.concatenate([scene, [-6.5, -1.7, 4.7]]))
+    assert 20.6 <= lo < 21.0 and 31.3 < hi <= 31.7
+    # a scene with a real gap (two surfaces 10 px apart, the nearer one 40 % of the points) keeps both: the cut is
+    # only ever among the outermost 2 %
+    two = np.concatenate([rng.uniform(0, 10, 200), rng.uniform(20, 30, 150)])
+    lo, hi = rectify.robust_disparity_range(two)
+    assert lo < 0.5 and hi > 29.5

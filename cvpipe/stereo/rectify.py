@@ -48,6 +48,11 @@ from .epipolar import FundamentalFit, epipoles, find_fundamental
 DISPARITY_PERCENTILES = (0.5, 99.5)
 #: the ``stereo.rectify`` defaults: the one declaration of the ``threshold`` / ``margin`` defaults below
 _RECTIFY = StereoRectifyParams()
+#: resampling of the rectified images: bicubic keeps the texture that the matching cost needs (bilinear is a
+#: low-pass filter at half-pixel shifts); over 72 unrectified Middlebury draws bad-2.0 after rectification rose by
+#: 0.44 points on average over the original pair's (at most 1.93) against 0.49 (at most 2.18) with bilinear, and
+#: Lanczos-4 rang (0.57, at most 2.28 on seeds 0-3)
+WARP_INTERPOLATION = cv2.INTER_CUBIC
 #: ``max_disp`` headroom above the largest (robust) inlier disparity: a fraction of it, at least 4 px
 _MAX_DISP_HEADROOM = (0.1, 4.0)
 
@@ -184,28 +189,31 @@ def _max_disp(hi: float) -> int:
     return int(max(16, math.ceil(top / 16.0) * 16))
 
 
+def _strays_below(d: np.ndarray, budget: int) -> int:
+    """How many of the lowest values of the sorted ``d`` (at most ``budget``) lie below the innermost gap of more
+    than ``max(8, 25 % of the range above it)``: a lone stray or a group of them, far from the rest."""
+    n = 0
+    for k in range(1, min(budget, len(d) - 2) + 1):
+        if d[k] - d[k - 1] > max(8.0, 0.25 * (d[-1] - d[k])):
+            n = k
+    return n
+
+
 def robust_disparity_range(d) -> tuple[float, float]:
     """Smallest and largest disparity of inlier matches, ignoring stray ones.
 
     A false match along an epipolar line is an inlier of F with any disparity (e.g. two SIFT keypoints at one
-    place matched to a repeated texture 400 px away). Isolated extremes, separated from the rest by a gap of more
-    than ``max(8 px, 25 % of the remaining range)``, are dropped from each end (at most 2 % of the points per end),
-    then the nearest-rank percentiles of :data:`DISPARITY_PERCENTILES` are taken.
+    place matched to a repeated texture 400 px away). At each end, the points beyond the innermost gap of more than
+    ``max(8 px, 25 % of the remaining range)`` among the outermost 2 % are dropped (a lone stray or a group of them,
+    e.g. false matches at -6.5, -1.7 and 4.7 px below a scene at 20.6-31.7 px), then the nearest-rank percentiles
+    of :data:`DISPARITY_PERCENTILES` are taken.
     """
     d = np.sort(np.asarray(d, dtype=np.float64).ravel())
     if len(d) == 0:
         raise EstimationError("no inlier matches to measure the disparity range")
     budget = max(1, int(0.02 * len(d)))
-    lo_i, hi_i = 0, len(d) - 1
-    for _ in range(budget):
-        span = d[hi_i - 1] - d[lo_i] if hi_i - 1 > lo_i else 0.0
-        if hi_i > lo_i and d[hi_i] - d[hi_i - 1] > max(8.0, 0.25 * span):
-            hi_i -= 1
-    for _ in range(budget):
-        span = d[hi_i] - d[lo_i + 1] if lo_i + 1 < hi_i else 0.0
-        if lo_i < hi_i and d[lo_i + 1] - d[lo_i] > max(8.0, 0.25 * span):
-            lo_i += 1
-    kept = d[lo_i:hi_i + 1]
+    d = d[:len(d) - _strays_below(-d[::-1], budget)]
+    kept = d[_strays_below(d, budget):]
     lo = np.percentile(kept, DISPARITY_PERCENTILES[0], method="higher")
     hi = np.percentile(kept, DISPARITY_PERCENTILES[1], method="lower")
     return float(lo), float(hi)
@@ -463,14 +471,14 @@ def rectified_depth_geometry(calib: Calibration) -> DepthGeometry:
 
 
 def warp_pair(left: np.ndarray, right: np.ndarray, rect: Rectification) -> tuple[np.ndarray, np.ndarray]:
-    """Both images in the rectified frame (bilinear; outside the original: 0)."""
+    """Both images in the rectified frame (bicubic, :data:`WARP_INTERPOLATION`; outside the original: 0)."""
     w, h = rect.size
     if rect.maps is not None:
         lx, ly, rx, ry = rect.maps
-        return (cv2.remap(left, lx, ly, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT),
-                cv2.remap(right, rx, ry, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT))
-    return (cv2.warpPerspective(left, rect.H_left, (w, h), flags=cv2.INTER_LINEAR),
-            cv2.warpPerspective(right, rect.H_right, (w, h), flags=cv2.INTER_LINEAR))
+        return (cv2.remap(left, lx, ly, WARP_INTERPOLATION, borderMode=cv2.BORDER_CONSTANT),
+                cv2.remap(right, rx, ry, WARP_INTERPOLATION, borderMode=cv2.BORDER_CONSTANT))
+    return (cv2.warpPerspective(left, rect.H_left, (w, h), flags=WARP_INTERPOLATION),
+            cv2.warpPerspective(right, rect.H_right, (w, h), flags=WARP_INTERPOLATION))
 
 
 def max_disp_from_matches(pts1, pts2, max_dy: float = 1.5) -> int:
