@@ -318,3 +318,23 @@ def test_robust_disparity_range_drops_a_group_of_strays():
     two = np.concatenate([rng.uniform(0, 10, 200), rng.uniform(20, 30, 150)])
     lo, hi = rectify.robust_disparity_range(two)
     assert lo < 0.5 and hi > 29.5
+
+
+def test_benchmark_truth_fundamental_and_noise_floor_reference():
+    """`bench stereo --rectify`'s references: the true F of an unrectified pair satisfies the epipolar constraint
+    of its true correspondences exactly, and the least-squares F of noise-free inliers is that F."""
+    from cvpipe.bench import stereo_rectify as br
+    from cvpipe.stereo import sampson_distance
+
+    rng = np.random.default_rng(7)
+    H_u, _ = br.unrectifying_homography(rng, (W, H))
+    truth = rng.uniform(5.0, 60.0, (H, W)).astype(np.float32)  # any disparity field: a rectified original pair
+    pl, pr = br.true_correspondences(truth, H_u, (W, H))
+    F = br.true_fundamental(H_u)
+    # exact up to rounding of pixel coordinates of a few hundred (float64): 1e-9 px
+    assert np.abs(sampson_distance(F, pl, pr)).max() < 1e-9
+    sample = rng.choice(len(pl), 300, replace=False)
+    F_ls = br.least_squares_fundamental(pl[sample], pr[sample])
+    # the same matrix up to scale and sign (both unit Frobenius after normalization)
+    Fa, Fb = F / np.linalg.norm(F), F_ls / np.linalg.norm(F_ls)
+    assert min(np.abs(Fa - Fb).max(), np.abs(Fa + Fb).max()) < 1e-6
