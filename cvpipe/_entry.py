@@ -9,7 +9,9 @@ command exits 0.
 
 Every SIGINT is also recorded (:func:`seen`): a command checks it between its steps
 (:func:`cvpipe.commands.step`), and after the command returned, an interrupt that never surfaced still ends the
-program with 130.
+program with 130. An interrupt whose handler runs in numba's own Python code (a compiled kernel calling back into
+it, or a kernel being compiled or loaded) is not raised there but delivered again 10 ms later, until it lands in
+other code (:func:`_inside_numba`).
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ import signal
 import sys
 
 _seen = False
+#: an interrupt that landed inside numba waits to be delivered again (:func:`_interrupt_again_soon`)
+_retrying = False
 
 
 def seen() -> bool:
@@ -33,8 +37,52 @@ def mark() -> None:
 
 
 def _on_sigint(signum, frame):
+    global _retrying
     mark()
+    if _inside_numba(frame):
+        _interrupt_again_soon()
+        return
+    _retrying = False
     raise KeyboardInterrupt
+
+
+def _inside_numba(frame) -> bool:
+    """True when the interrupted Python code belongs to numba or llvmlite, or the main thread holds numba's
+    compiler lock (compiling a kernel, or loading one from its cache).
+
+    A KeyboardInterrupt must not be raised there: compiled kernels call back into Python (``_numba_unpickle``
+    fetches a constant while stereo's parallel ``_winner`` runs) and do not expect it to fail, and an interrupted
+    load leaves a half-built kernel: a Ctrl-C at such a moment crashed the process with SIGSEGV in about 1 of 30
+    tries. numba is only looked up in ``sys.modules``, never imported: this module stays stdlib-only.
+    """
+    numba = sys.modules.get("numba")
+    if numba is None:
+        return False
+    lock = sys.modules.get("numba.core.compiler_lock")
+    if lock is not None and lock.global_compiler_lock.is_locked():
+        return True
+    file = frame.f_code.co_filename if frame is not None else ""
+    return any(file.startswith(os.path.dirname(m.__file__) + os.sep)
+               for m in (numba, sys.modules.get("llvmlite")) if m is not None and getattr(m, "__file__", None))
+
+
+def _interrupt_again_soon() -> None:
+    """Signal the main thread again every 10 ms until the interrupt lands outside numba (:func:`_on_sigint`)."""
+    global _retrying
+    if _retrying:
+        return
+    _retrying = True
+    import _thread
+    import threading
+    import time
+
+    def retry():
+        while _retrying:
+            time.sleep(0.01)
+            if _retrying:
+                _thread.interrupt_main()
+
+    threading.Thread(target=retry, name="cvpipe-interrupt", daemon=True).start()
 
 
 def exit_interrupted(json_mode: bool) -> None:
