@@ -226,6 +226,59 @@ def test_entry_point_is_light_and_is_the_console_script():
     assert sorted(set(loaded[0]) - set(loaded[1])) == ["cvpipe", "cvpipe._entry"]
 
 
+def _stereo_command(left, right, out) -> list:
+    # -q: a cold numba cache adds the one-time compile note on stderr, which is not what this test is about
+    # `-m cvpipe`: the program's entry point, as the console script runs it
+    return [sys.executable, "-m", "cvpipe", "-q", "stereo", str(left), str(right), "--max-disp", "128", "-o",
+            str(out / "d.npy"), "--json"]
+
+
+def _threads(pid: int) -> int | None:
+    try:
+        return len(os.listdir(f"/proc/{pid}/task"))
+    except FileNotFoundError:  # it has just ended
+        return None
+
+
+def _peak_threads(cmd) -> int:
+    """The most threads a run of ``cmd`` has at once: numba's worker pool starts with the first parallel kernel and
+    is the last to appear, so reaching this count means the kernels run (it was 6 here, 7 on another machine)."""
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env=dict(ENV, NUMBA_NUM_THREADS="2"))
+    peak = 1
+    while proc.poll() is None:
+        peak = max(peak, _threads(proc.pid) or 0)
+        time.sleep(0.002)
+    return peak
+
+
+def _interrupt_stereo(cmd, out, delay, peak=None):
+    """Run ``cmd`` and send SIGINT ``delay`` seconds after its start (``peak`` None: start-up) or after it reached
+    ``peak`` threads (the parallel kernels); None when the command finished first."""
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=dict(ENV, NUMBA_NUM_THREADS="2"))
+    t0 = time.monotonic()
+    while proc.poll() is None and time.monotonic() - t0 < 300:
+        n = _threads(proc.pid)
+        if n is None or (peak is None and time.monotonic() - t0 > delay):
+            break
+        if peak is not None and n >= peak:
+            time.sleep(delay)
+            break
+        time.sleep(0.002)
+    if proc.poll() is not None:
+        proc.communicate()
+        return None
+    proc.send_signal(signal.SIGINT)
+    stdout, stderr = proc.communicate(timeout=300)
+    if proc.returncode == 0 and (out / "d.npy").exists() and "valid_fraction" in json.loads(stdout):
+        # the signal came after the work, while the interpreter shut down: the command ends with its own status
+        # (before the entry point ignored SIGINT at that point, this was death by SIGINT, -2, or a crash, -11)
+        (out / "d.npy").unlink()
+        return None
+    return proc, stdout, stderr
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("when", ["start-up", "parallel kernels"])
 def test_ctrl_c_during_parallel_stereo(tmp_path, when):
@@ -240,30 +293,20 @@ def test_ctrl_c_during_parallel_stereo(tmp_path, when):
     subprocess.run([sys.executable, "-m", "cvpipe", "-q", "stereo", str(left), str(right), "--max-disp", "128",
                     "-o", str(tmp_path / "warm.npy")], env=dict(ENV, NUMBA_NUM_THREADS="2"), check=True,
                    capture_output=True, timeout=600)
-    # -q: a cold numba cache adds the one-time compile note on stderr, which is not what this test is about
-    # `-m cvpipe`: the program's entry point, as the console script runs it
-    proc = subprocess.Popen([sys.executable, "-m", "cvpipe", "-q", "stereo", str(left), str(right), "--max-disp",
-                             "128", "-o", str(out / "d.npy"), "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=dict(ENV, NUMBA_NUM_THREADS="2"))
-    base, t0 = None, time.monotonic()
-    while proc.poll() is None and time.monotonic() - t0 < 300:
-        n = len(os.listdir(f"/proc/{proc.pid}/task"))
-        base = n if base is None else base
-        if when == "start-up" and time.monotonic() - t0 > 1.5:
+    cmd = _stereo_command(left, right, out)
+    peak = None if when == "start-up" else _peak_threads(cmd)
+    if (out / "d.npy").exists():
+        (out / "d.npy").unlink()
+    # the kernels take a few tenths of a ~2 s run: up to 5 runs, the signal sent 0-150 ms after numba's workers
+    # appeared, until one lands before the work is done
+    # start-up: the imports and numba's cache load take the first second or so
+    for delay in ([0.5, 0.3, 0.8] if when == "start-up" else [0.0, 0.03, 0.06, 0.1, 0.15]):
+        done = _interrupt_stereo(cmd, out, delay, peak)
+        if done is not None:
             break
-        # numba's 2 workers start last (1 thread at start, 7 in the kernels on the 2-core machine)
-        if when == "parallel kernels" and n >= base + 6:
-            time.sleep(0.05)
-            break
-        time.sleep(0.05)
-    if proc.poll() is not None:
-        pytest.skip("the run finished before it could be interrupted")
-    proc.send_signal(signal.SIGINT)
-    stdout, stderr = proc.communicate(timeout=300)
-    if proc.returncode == 0 and (out / "d.npy").exists() and "valid_fraction" in json.loads(stdout):
-        # the signal came after the work, while the interpreter shut down: the command ends with its own status
-        # (before the entry point ignored SIGINT at that point, this was death by SIGINT, -2, or a crash, -11)
-        pytest.skip("the command had finished when the signal arrived")
+    else:
+        pytest.skip("every run had finished when the signal arrived")
+    proc, stdout, stderr = done
     # before the entry point deferred interrupts that land in numba's own Python code (a compiled kernel calling
     # back into `_numba_unpickle`), this was a SIGSEGV (-11) in about 1 run of 30
     assert proc.returncode == 130, stderr
