@@ -134,3 +134,18 @@ class TestRansac:
             epipolar.eight_point(np.full((10, 2), np.nan), np.zeros((10, 2)))
         with pytest.raises(InputError, match="exactly 7"):
             epipolar.seven_point(np.zeros((8, 2)), np.zeros((8, 2)))
+
+
+def test_final_refit_cut_off_follows_the_noise_scale():
+    """The final Tukey refit cuts off at 4.685 sigma of the inliers' Sampson distances (sigma from their median),
+    kept within [0.05, 2] x the threshold."""
+    from cvpipe.stereo.epipolar import _noise_cutoff
+
+    rng = np.random.default_rng(0)
+    d = np.abs(rng.normal(0.0, 0.1, 20_000))  # Sampson distances of Gaussian noise, sigma 0.1 px
+    # the median of |N(0, s)| is 0.6745 s: with 20 000 samples the estimate is within ~1.5 % (3 standard errors)
+    assert _noise_cutoff(d, 1.0) == pytest.approx(4.685 * 0.1, rel=0.03)
+    # outliers beyond the threshold do not move it (only the inliers' median counts)
+    assert _noise_cutoff(np.concatenate([d, rng.uniform(5, 50, 5000)]), 1.0) == pytest.approx(4.685 * 0.1, rel=0.03)
+    assert _noise_cutoff(np.zeros(100), 1.0) == pytest.approx(0.05)  # exact data: the floor, not 0
+    assert _noise_cutoff(np.abs(rng.normal(0.0, 0.8, 1000)), 1.0) == pytest.approx(2.0)  # the cap
