@@ -149,3 +149,11 @@ def test_final_refit_cut_off_follows_the_noise_scale():
     assert _noise_cutoff(np.concatenate([d, rng.uniform(5, 50, 5000)]), 1.0) == pytest.approx(4.685 * 0.1, rel=0.03)
     assert _noise_cutoff(np.zeros(100), 1.0) == pytest.approx(0.05)  # exact data: the floor, not 0
     assert _noise_cutoff(np.abs(rng.normal(0.0, 0.8, 1000)), 1.0) == pytest.approx(2.0)  # the cap
+
+
+def test_sampson_least_squares_refuses_bad_rounds_and_too_few_points():
+    p = np.random.default_rng(1).uniform(0, 100, (10, 2))
+    with pytest.raises(InputError, match="`rounds`"):
+        epipolar.sampson_least_squares(p, p + 1.0, rounds=-1)
+    with pytest.raises(EstimationError, match="at least 8"):
+        epipolar.sampson_least_squares(p[:7], p[:7] + 1.0)

@@ -145,18 +145,6 @@ def true_fundamental(H_u: np.ndarray) -> np.ndarray:
     return np.linalg.inv(H_u).T @ F0
 
 
-def least_squares_fundamental(p1: np.ndarray, p2: np.ndarray, rounds: int = 10) -> np.ndarray:
-    """The Sampson least-squares F of correspondences that are all inliers (8-point, reweighted so that the
-    algebraic error becomes the Sampson distance): the reference estimator of the noise floor."""
-    F = stereo.eight_point(p1, p2)
-    h1, h2 = np.column_stack([p1, np.ones(len(p1))]), np.column_stack([p2, np.ones(len(p2))])
-    for _ in range(rounds):
-        a, b = h1 @ F.T, h2 @ F
-        w = 1.0 / np.sqrt(a[:, 0] ** 2 + a[:, 1] ** 2 + b[:, 0] ** 2 + b[:, 1] ** 2)
-        F = stereo.eight_point(p1, p2, w / w.mean())
-    return F
-
-
 def run_rectify(args: argparse.Namespace, pairs: dict) -> int:
     """The rectification benchmark over ``pairs`` (name -> (left BGR, right BGR, true disparity))."""
     from .stereo import disparity_range
@@ -209,7 +197,7 @@ def run_rectify(args: argparse.Namespace, pairs: dict) -> int:
         ev_cv = _vertical(H1, H2, pl, pr)
         # the noise floor: least squares on exactly the matches that the truth calls inliers, rectified as ours
         true_inl = stereo.sampson_distance(true_fundamental(H_u), p1, p2) <= THRESHOLD
-        F_ls = least_squares_fundamental(p1[true_inl], p2[true_inl])
+        F_ls = stereo.sampson_least_squares(p1[true_inl], p2[true_inl])
         H1_ls, H2_ls, *_ = rectify.rectifying_homographies(F_ls, p1[true_inl], p2[true_inl], (w, h))
         ev_ls = _vertical(H1_ls, H2_ls, pl, pr)
         dist_ours = rectify.distortion(ours.H_left, (w, h))

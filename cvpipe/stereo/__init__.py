@@ -29,7 +29,8 @@ True
 
 from .calibration import Calibration, parse_calibration, parse_middlebury_calib, parse_opencv_calib
 from .depth import colorize, depth_from_disparity, parse_ply, ply_bytes, point_cloud
-from .epipolar import FundamentalFit, eight_point, epipoles, find_fundamental, sampson_distance, seven_point
+from .epipolar import (FundamentalFit, eight_point, epipoles, find_fundamental, sampson_distance,
+                       sampson_least_squares, seven_point)
 from .opencv_baseline import (METHOD_SECTIONS, METHODS, SGBM_MODES, compute_disparity, disparity_opencv_bm,
                               disparity_opencv_sgbm, disparity_with)
 from .pipeline import KINDS, RectifiedPair, disparity_item, feature_matches, rectify_item, rectify_pair
@@ -46,7 +47,8 @@ __all__ = [
     "disparity_sgm", "fill_invalid",
     "METHODS", "METHOD_SECTIONS", "SGBM_MODES", "compute_disparity", "disparity_with", "disparity_opencv_bm",
     "disparity_opencv_sgbm",
-    "FundamentalFit", "eight_point", "seven_point", "sampson_distance", "epipoles", "find_fundamental",
+    "FundamentalFit", "eight_point", "seven_point", "sampson_distance", "sampson_least_squares", "epipoles",
+    "find_fundamental",
     "Calibration", "parse_calibration", "parse_middlebury_calib", "parse_opencv_calib",
     "DepthGeometry", "Rectification", "distortion", "robust_disparity_range", "rectifying_homographies",
     "rectify_uncalibrated", "opencv_uncalibrated", "rectify_calibrated", "rectified_depth_geometry", "warp_pair",

@@ -201,6 +201,38 @@ def eight_point(pts1, pts2, weights=None) -> np.ndarray:
     return _unit(T2.T @ Fn @ T1)
 
 
+def sampson_least_squares(pts1, pts2, rounds: int = _REFINE_ROUNDS) -> np.ndarray:
+    """The rank-2 F that minimizes the Sampson distances of correspondences that are all inliers.
+
+    The normalized 8-point algorithm, reweighted ``rounds`` times so that the algebraic error becomes the Sampson
+    distance (the refit that :func:`find_fundamental` applies to its inliers, without RANSAC or robust weights).
+
+    Parameters
+    ----------
+    pts1, pts2 : (N, 2) array_like
+        Corresponding pixels, N >= 8, no outliers.
+    rounds : int
+        Reweighting rounds (>= 0).
+
+    Returns
+    -------
+    F : (3, 3) float64
+        ``x2^T F x1 = 0``, rank 2, unit Frobenius norm.
+
+    Raises
+    ------
+    InputError
+        Bad shapes, NaN/inf or ``rounds`` < 0.
+    EstimationError
+        Fewer than 8 points, all points collinear, or a rank-deficient system.
+    """
+    if isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 0:
+        raise InputError(f"`rounds` must be an integer >= 0, got {rounds!r}")
+    p1, p2 = _check_pair(pts1, pts2, 8)
+    T1, T2 = hartley_normalization(p1), hartley_normalization(p2)
+    return _refit(_apply(T1, p1), _apply(T2, p2), p1, p2, T1, T2, np.ones(len(p1), bool), int(rounds))
+
+
 def _apply(T: np.ndarray, p: np.ndarray) -> np.ndarray:
     return p @ T[:2, :2].T + T[:2, 2]
 
