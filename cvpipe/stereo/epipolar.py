@@ -206,25 +206,8 @@ def sampson_least_squares(pts1, pts2, rounds: int = _REFINE_ROUNDS) -> np.ndarra
 
     The normalized 8-point algorithm, reweighted ``rounds`` times so that the algebraic error becomes the Sampson
     distance (the refit that :func:`find_fundamental` applies to its inliers, without RANSAC or robust weights).
-
-    Parameters
-    ----------
-    pts1, pts2 : (N, 2) array_like
-        Corresponding pixels, N >= 8, no outliers.
-    rounds : int
-        Reweighting rounds (>= 0).
-
-    Returns
-    -------
-    F : (3, 3) float64
-        ``x2^T F x1 = 0``, rank 2, unit Frobenius norm.
-
-    Raises
-    ------
-    InputError
-        Bad shapes, NaN/inf or ``rounds`` < 0.
-    EstimationError
-        Fewer than 8 points, all points collinear, or a rank-deficient system.
+    ``pts1``, ``pts2``, the result and the errors are those of :func:`eight_point` (the points must hold no
+    outliers); ``rounds`` (>= 0, else InputError) is the number of reweighting rounds.
     """
     if isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 0:
         raise InputError(f"`rounds` must be an integer >= 0, got {rounds!r}")
