@@ -127,13 +127,16 @@ def _vote_parallel(xs, ys, tab_cos, tab_sin, numrho, nchunks):
     return acc
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _is_peak(acc, n, r, threshold):
     """OpenCV's line cell: more than ``threshold`` votes, above the lower rho and angle neighbours, at least the
     higher ones."""
     v = acc[n, r]
-    return (v > threshold and v > acc[n, r - 1] and v >= acc[n, r + 1]
-            and v > acc[n - 1, r] and v >= acc[n + 1, r])
+    # the threshold test returns on its own, the function is not IR-inlined and callers branch on its result (and
+    # keep their loops free of allocations): otherwise the scan of the accumulator runs 5-15x slower
+    if v <= threshold:
+        return False
+    return v > acc[n, r - 1] and v >= acc[n, r + 1] and v > acc[n - 1, r] and v >= acc[n + 1, r]
 
 
 @njit(cache=True)
@@ -146,7 +149,8 @@ def _peaks(acc, threshold):
     count = 0  # a first pass counts the peaks, so that the second fills an array of exactly that size
     for n in range(1, na + 1):
         for r in range(1, nr + 1):
-            count += _is_peak(acc, n, r, threshold)
+            if _is_peak(acc, n, r, threshold):
+                count += 1
     bases = np.empty(count, np.int64)
     k = 0
     vmax = 0
