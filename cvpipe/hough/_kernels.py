@@ -146,20 +146,32 @@ def _peaks(acc, threshold):
     nr = acc.shape[1] - 2
     width = np.int64(nr + 2)
     cells = np.int64(na + 2) * width
-    count = 0  # a first pass counts the peaks, so that the second fills an array of exactly that size
+    # the cells above the threshold first (two plain scans, the second fills an array of exactly their number), then
+    # the neighbour test on those only
+    above = 0
     for n in range(1, na + 1):
+        row = acc[n]
         for r in range(1, nr + 1):
-            if _is_peak(acc, n, r, threshold):
-                count += 1
-    bases = np.empty(count, np.int64)
+            if row[r] > threshold:
+                above += 1
+    candidates = np.empty(above, np.int64)
     k = 0
-    vmax = 0
     for n in range(1, na + 1):
+        row = acc[n]
         for r in range(1, nr + 1):
-            if _is_peak(acc, n, r, threshold):
-                bases[k] = n * width + r
+            if row[r] > threshold:
+                candidates[k] = n * width + r
                 k += 1
-                vmax = max(vmax, acc[n, r])
+    bases = np.empty(above, np.int64)
+    count = 0
+    vmax = 0
+    for b in candidates:
+        n = b // width
+        r = b - n * width
+        if _is_peak(acc, n, r, threshold):
+            bases[count] = b
+            count += 1
+            vmax = max(vmax, acc[n, r])
     # more votes first, then the smaller flat index (angle-major), as OpenCV's comparator: one int64 key per peak
     keys = np.empty(count, np.int64)
     for k in range(count):

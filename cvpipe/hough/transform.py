@@ -188,14 +188,21 @@ def _grid(h: int, w: int, rho: float, theta: float, min_theta: float, max_theta:
 # ------------------------------------------------------------------------------------------------- standard
 
 
-def _use_parallel(parallel: bool | None) -> bool:
-    """Resolve ``parallel=None``: vote in parallel only when the machine has a core to spare.
+#: fewer votes than this (edge pixels x angles) are cast on one thread: about 1 ms of work, below which starting
+#: the threads and waiting at their barrier costs more than the second core saves
+_PARALLEL_MIN_VOTES = 1_500_000
+
+
+def _use_parallel(parallel: bool | None, votes: int | None = None) -> bool:
+    """Resolve ``parallel=None``: vote in parallel only for enough ``votes`` and when the machine has a core to spare.
 
     On a machine whose cores are busy with other work, a parallel vote waits at its barrier for a descheduled thread
     and is slower than one thread; the 1-minute load average is the cheap signal for that.
     """
     if parallel is not None:
         return bool(parallel)
+    if votes is not None and votes < _PARALLEL_MIN_VOTES:
+        return False
     now = time.monotonic()
     if now - _AUTO_PARALLEL[0] > 1.0:  # asking costs ~0.1 ms, so at most once a second
         try:
@@ -246,7 +253,7 @@ def hough_accumulator(edges: np.ndarray, grid: HoughGrid, parallel: bool | None 
 
     edges = _check_edges(edges)
     xs, ys = _kernels.run(_kernels._edge_points, edges)
-    threads = numba.get_num_threads() if _use_parallel(parallel) else 1
+    threads = numba.get_num_threads() if _use_parallel(parallel, len(xs) * len(grid.tab_cos)) else 1
     if threads > 1:
         return _kernels.run(_kernels._vote_parallel, xs, ys, grid.tab_cos, grid.tab_sin, grid.numrho, threads)
     return _kernels.run(_kernels._vote_serial, xs, ys, grid.tab_cos, grid.tab_sin, grid.numrho)
