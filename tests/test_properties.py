@@ -104,6 +104,35 @@ def test_chance_probability_is_a_probability(n, threshold, area):
     assert not np.isnan(lnfa)
 
 
+def _pairs_within(src, dst, H, threshold):
+    """Brute force: pairs (i, j), i != j, with dehom(H src_i) within ``threshold`` of dst_j."""
+    q = np.c_[src, np.ones(len(src))] @ np.asarray(H, float).T
+    ok = np.abs(q[:, 2]) > 1e-12
+    u = q[:, :2] / np.where(ok, q[:, 2], 1.0)[:, None]
+    d2 = ((u[:, None, :] - dst[None, :, :]) ** 2).sum(axis=2)
+    hit = (d2 <= threshold ** 2) & ok[:, None]
+    np.fill_diagonal(hit, False)
+    return int(hit.sum())
+
+
+@FAST
+@given(st.integers(2, 300), st.sampled_from([0.3, 1.0, 3.0, 25.0]), st.integers(0, 3), st.booleans(),
+       st.integers(0, 2 ** 31))
+def test_chance_probability_counts_exactly_the_pairs_within_the_threshold(n, threshold, decimals, clustered, seed):
+    # the permutation estimate bins dst into a grid; it must count the same pairs as comparing every pair (rounded
+    # coordinates and a cluster of equal points put pairs exactly on and around the threshold and the cell borders)
+    rng = np.random.default_rng(seed)
+    src, dst = rng.uniform(0, 200, (n, 2)).round(decimals), rng.uniform(0, 200, (n, 2)).round(decimals)
+    if clustered:
+        dst[: n // 2] = dst[0]
+    H = np.eye(3) + np.diag([0.02, -0.01, 0.0])
+    H[:2, 2] = rng.uniform(-5, 5, 2)
+    area = 1e12  # the uniform model then gives ~0, so the permutation count is what is returned
+    p = homography.chance_probability(H, src, dst, threshold, area)
+    assert p == pytest.approx(max(np.pi * threshold ** 2 / area, _pairs_within(src, dst, H, threshold) / (n * (n - 1.0))),
+                              rel=1e-12, abs=0)
+
+
 _MAGIC = [b"", b"\x89PNG\r\n\x1a\n", b"\xff\xd8\xff\xe0", b"BM", b"II*\x00", b"RIFF\x00\x00\x00\x00WEBP", b"P5\n"]
 
 

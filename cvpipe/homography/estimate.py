@@ -13,7 +13,7 @@ import numpy as np
 from ..errors import EstimationError, InputError
 from ..geometry import as_points
 from ..params import HomographyEstimateParams, section_or_default
-from ._kernels import _chance_hits, _finalize, _normalize, _sq_errors
+from ._kernels import _chance_hits, _distinct_rows, _finalize, _normalize, _sq_errors
 from ._ransac_kernels import _SPRT_TM, _collapsed, _ransac_chunk, _sprt_threshold
 from .dlt import _check_pair, _unit_h22
 
@@ -142,11 +142,6 @@ def chance_probability(H: np.ndarray, src: np.ndarray, dst: np.ndarray, threshol
     return max(p_uniform, hits / (len(rows) * (n - 1.0)))
 
 
-def _distinct(pts: np.ndarray) -> int:
-    """Number of distinct rows of an (N, 2) point array."""
-    return int(len(np.unique(pts, axis=0))) if len(pts) else 0
-
-
 def points_area(pts: np.ndarray) -> float:
     """Area in px^2 of the axis-aligned bounding box of ``pts`` (N, 2), at least 1 px on each side."""
     span = np.ptp(np.asarray(pts, np.float64), axis=0) + 1.0
@@ -199,8 +194,9 @@ def check_significant(fit: HomographyFit, src, dst, threshold: float, area: floa
     inl = np.asarray(fit.inliers, bool)
     # evidence counts distinct points: many matches to one keypoint (or SIFT's copies of a keypoint with several
     # orientations) are one observation, and a model that squeezes a row of sources onto one point gains nothing
-    k = min(_distinct(s[inl]), _distinct(d[inl]))
-    n = min(_distinct(s), _distinct(d))
+    n_src, k_src = _distinct_rows(s, inl)
+    n_dst, k_dst = _distinct_rows(d, inl)
+    k, n = min(k_src, k_dst), min(n_src, n_dst)
     p = chance_probability(fit.H, s, d, threshold, area)
     lnfa = log10_nfa(k, n, p)
     if not lnfa < math.log10(MAX_NFA):
