@@ -17,6 +17,7 @@ BENCHMARKS = {
     "panorama": "panorama",
     "pipeline": "pipeline",
     "scale": "scale",
+    "guard": "guard",
 }
 
 
