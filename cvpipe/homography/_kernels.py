@@ -331,7 +331,6 @@ def _lm_refine(src, dst, weight, H0, max_iter):
     lam = 1e-3
     JtJ = np.zeros((8, 8))
     Jtr = np.zeros(8)
-    J = np.zeros((2, 8))
     A = np.zeros((8, 8))
     negJtr = np.empty(8)
     delta = np.empty(8)
@@ -348,27 +347,50 @@ def _lm_refine(src, dst, weight, H0, max_iter):
             vv = (p[3] * x + p[4] * y + p[5]) * iw
             ru = uu - us[i]
             rv = vv - vs[i]
-            J[0, 0] = x * iw
-            J[0, 1] = y * iw
-            J[0, 2] = iw
-            J[0, 3] = 0.0
-            J[0, 4] = 0.0
-            J[0, 5] = 0.0
-            J[0, 6] = -uu * x * iw
-            J[0, 7] = -uu * y * iw
-            J[1, 0] = 0.0
-            J[1, 1] = 0.0
-            J[1, 2] = 0.0
-            J[1, 3] = x * iw
-            J[1, 4] = y * iw
-            J[1, 5] = iw
-            J[1, 6] = -vv * x * iw
-            J[1, 7] = -vv * y * iw
+            # the Jacobian rows are g = d(uu)/dp = (x, y, 1, 0, 0, 0, -uu x, -uu y) / w and
+            # h = d(vv)/dp = (0, 0, 0, x, y, 1, -vv x, -vv y) / w; the products with their zero entries are left out
+            # (exact zeros add nothing), so the sums below are those of the full 2 x 8 products, in scalars
+            g0 = x * iw
+            g1 = y * iw
+            g2 = iw
+            g6 = -uu * x * iw
+            g7 = -uu * y * iw
+            h6 = -vv * x * iw
+            h7 = -vv * y * iw
             wi = ws[i]
-            for a in range(8):
-                Jtr[a] += wi * (J[0, a] * ru + J[1, a] * rv)
-                for b in range(a, 8):
-                    JtJ[a, b] += wi * (J[0, a] * J[0, b] + J[1, a] * J[1, b])
+            Jtr[0] += wi * (g0 * ru)
+            Jtr[1] += wi * (g1 * ru)
+            Jtr[2] += wi * (g2 * ru)
+            Jtr[3] += wi * (g0 * rv)
+            Jtr[4] += wi * (g1 * rv)
+            Jtr[5] += wi * (g2 * rv)
+            Jtr[6] += wi * (g6 * ru + h6 * rv)
+            Jtr[7] += wi * (g7 * ru + h7 * rv)
+            # the upper-left and the middle 3 x 3 blocks are the same sums (g0..g2 equal h3..h5)
+            JtJ[0, 0] += wi * (g0 * g0)
+            JtJ[0, 1] += wi * (g0 * g1)
+            JtJ[0, 2] += wi * (g0 * g2)
+            JtJ[1, 1] += wi * (g1 * g1)
+            JtJ[1, 2] += wi * (g1 * g2)
+            JtJ[2, 2] += wi * (g2 * g2)
+            JtJ[0, 6] += wi * (g0 * g6)
+            JtJ[0, 7] += wi * (g0 * g7)
+            JtJ[1, 6] += wi * (g1 * g6)
+            JtJ[1, 7] += wi * (g1 * g7)
+            JtJ[2, 6] += wi * (g2 * g6)
+            JtJ[2, 7] += wi * (g2 * g7)
+            JtJ[3, 6] += wi * (g0 * h6)
+            JtJ[3, 7] += wi * (g0 * h7)
+            JtJ[4, 6] += wi * (g1 * h6)
+            JtJ[4, 7] += wi * (g1 * h7)
+            JtJ[5, 6] += wi * (g2 * h6)
+            JtJ[5, 7] += wi * (g2 * h7)
+            JtJ[6, 6] += wi * (g6 * g6 + h6 * h6)
+            JtJ[6, 7] += wi * (g6 * g7 + h6 * h7)
+            JtJ[7, 7] += wi * (g7 * g7 + h7 * h7)
+        for a in range(3):
+            for b in range(a, 3):
+                JtJ[3 + a, 3 + b] = JtJ[a, b]
         for a in range(8):
             for b in range(a):
                 JtJ[a, b] = JtJ[b, a]
@@ -474,13 +496,7 @@ def _chance_hits(src, dst, H, thr2, rows):  # pragma: no cover - compiled
     n = dst.shape[0]
     if n == 0:
         return 0
-    x0, y0 = dst[0, 0], dst[0, 1]
-    x1, y1 = x0, y0
-    for j in range(n):
-        x0 = min(x0, dst[j, 0])
-        y0 = min(y0, dst[j, 1])
-        x1 = max(x1, dst[j, 0])
-        y1 = max(y1, dst[j, 1])
+    x0, y0, x1, y1 = _bounding_box(dst)
     # wider by a rounding margin, so that a point within the threshold is never two cells away
     cell = math.sqrt(thr2) * (1.0 + 1e-9)
     cell = max(cell, math.sqrt((x1 - x0) * (y1 - y0) / (4.0 * n)), (x1 - x0) / (4.0 * n), (y1 - y0) / (4.0 * n))
@@ -532,37 +548,45 @@ def _chance_hits(src, dst, H, thr2, rows):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def _distinct_rows(pts, mask):  # pragma: no cover - compiled
-    """Number of distinct rows of the (N, 2) ``pts``, and of its rows where ``mask`` is true."""
+    """Number of distinct rows of the (N, 2) ``pts``, and of its rows where ``mask`` is true.
+
+    One pass over an open-addressing hash table of the points (O(N); equal points have equal hashes, and points
+    are compared exactly).
+    """
     n = pts.shape[0]
-    order = np.argsort(pts[:, 0], kind="mergesort")
+    size = 1
+    while size < 2 * n:
+        size *= 2
+    slot = np.full(size, -1, np.int64)  # a row of pts, or -1 for an empty slot
+    hit = np.zeros(size, np.bool_)  # a row of this point is in the mask
     n_all = 0
     n_mask = 0
-    k = 0
-    while k < n:
-        e = k + 1  # rows order[k:e] share their x
-        while e < n and pts[order[e], 0] == pts[order[k], 0]:
-            e += 1
-        if e == k + 1:
+    for i in range(n):
+        x = pts[i, 0]
+        y = pts[i, 1]
+        v = abs(x) * 73856093.0 + abs(y) * 19349663.0
+        if not v < 1e15:  # keep the integer conversion in range (the hash only has to be equal for equal points)
+            v = v % 1e15 if math.isfinite(v) else 0.0
+        h = np.int64(v) & (size - 1)
+        while slot[h] >= 0 and not (pts[slot[h], 0] == x and pts[slot[h], 1] == y):
+            h = (h + 1) & (size - 1)
+        if slot[h] < 0:
+            slot[h] = i
             n_all += 1
-            if mask[order[k]]:
-                n_mask += 1
-            k = e
-            continue
-        ys = np.empty(e - k)
-        for t in range(k, e):
-            ys[t - k] = pts[order[t], 1]
-        by_y = np.argsort(ys, kind="mergesort")
-        t = 0
-        while t < e - k:
-            f = t  # rows by_y[t:f] share their y too: one distinct point, in the mask when any of them is
-            hit = False
-            while f < e - k and ys[by_y[f]] == ys[by_y[t]]:
-                if mask[order[k + by_y[f]]]:
-                    hit = True
-                f += 1
-            n_all += 1
-            if hit:
-                n_mask += 1
-            t = f
-        k = e
+        if mask[i] and not hit[h]:
+            hit[h] = True
+            n_mask += 1
     return n_all, n_mask
+
+
+@njit(cache=True)
+def _bounding_box(pts):  # pragma: no cover - compiled
+    """(x min, y min, x max, y max) of the (N >= 1, 2) ``pts``."""
+    x0, y0 = pts[0, 0], pts[0, 1]
+    x1, y1 = x0, y0
+    for j in range(pts.shape[0]):
+        x0 = min(x0, pts[j, 0])
+        y0 = min(y0, pts[j, 1])
+        x1 = max(x1, pts[j, 0])
+        y1 = max(y1, pts[j, 1])
+    return x0, y0, x1, y1

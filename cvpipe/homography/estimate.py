@@ -13,7 +13,7 @@ import numpy as np
 from ..errors import EstimationError, InputError
 from ..geometry import as_points
 from ..params import HomographyEstimateParams, section_or_default
-from ._kernels import _chance_hits, _distinct_rows, _finalize, _normalize, _sq_errors
+from ._kernels import _bounding_box, _chance_hits, _distinct_rows, _finalize, _normalize, _sq_errors
 from ._ransac_kernels import _SPRT_TM, _collapsed, _ransac_chunk, _sprt_threshold
 from .dlt import _check_pair, _unit_h22
 
@@ -144,8 +144,11 @@ def chance_probability(H: np.ndarray, src: np.ndarray, dst: np.ndarray, threshol
 
 def points_area(pts: np.ndarray) -> float:
     """Area in px^2 of the axis-aligned bounding box of ``pts`` (N, 2), at least 1 px on each side."""
-    span = np.ptp(np.asarray(pts, np.float64), axis=0) + 1.0
-    return float(span[0] * span[1])
+    p = np.ascontiguousarray(pts, np.float64).reshape(-1, 2)
+    if len(p) == 0:
+        return 1.0
+    x0, y0, x1, y1 = _bounding_box(p)
+    return float((x1 - x0 + 1.0) * (y1 - y0 + 1.0))
 
 
 def _check_area(area) -> None:
@@ -159,7 +162,29 @@ def _significant(fit: HomographyFit, src: np.ndarray, dst: np.ndarray, threshold
     """:func:`check_significant` for more than 4 correspondences (a minimal set is fitted exactly: nothing to test)."""
     if len(dst) <= 4:
         return fit
-    return check_significant(fit, src, dst, threshold, area)
+    return _nfa_test(fit, src, dst, threshold, area)
+
+
+def _nfa_test(fit: HomographyFit, src: np.ndarray, dst: np.ndarray, threshold: float,
+              area: float | None) -> HomographyFit:
+    """:func:`check_significant` of validated (N, 2) float64 points."""
+    inl = np.asarray(fit.inliers, bool)
+    # evidence counts distinct points: many matches to one keypoint (or SIFT's copies of a keypoint with several
+    # orientations) are one observation, and a model that squeezes a row of sources onto one point gains nothing
+    n_src, k_src = _distinct_rows(src, inl)
+    n_dst, k_dst = _distinct_rows(dst, inl)
+    k, n = min(k_src, k_dst), min(n_src, n_dst)
+    p = chance_probability(fit.H, src, dst, threshold, area)
+    lnfa = log10_nfa(k, n, p)
+    if not lnfa < math.log10(MAX_NFA):
+        raise EstimationError(
+            f"the best homography has {k} distinct inliers of {n} distinct matches ({fit.num_inliers} of {len(src)} "
+            f"in all) within {float(threshold):g} px, which is chance "
+            f"level (an unrelated match is an inlier with probability {p:.2g}; NFA 10^{lnfa:.1f} >= {MAX_NFA:g}): "
+            "the images do not seem to show the same plane; check that they overlap, or try another --detector "
+            "or more features"
+        )
+    return HomographyFit(H=fit.H, inliers=fit.inliers, iterations=fit.iterations, rms=fit.rms, log10_nfa=lnfa)
 
 
 def check_significant(fit: HomographyFit, src, dst, threshold: float, area: float | None = None) -> HomographyFit:
@@ -190,24 +215,7 @@ def check_significant(fit: HomographyFit, src, dst, threshold: float, area: floa
     >>> bool(check_significant(fit, src, src + 7.0, threshold=3.0).log10_nfa < 0)
     True
     """
-    s, d = as_points("src", src), as_points("dst", dst)
-    inl = np.asarray(fit.inliers, bool)
-    # evidence counts distinct points: many matches to one keypoint (or SIFT's copies of a keypoint with several
-    # orientations) are one observation, and a model that squeezes a row of sources onto one point gains nothing
-    n_src, k_src = _distinct_rows(s, inl)
-    n_dst, k_dst = _distinct_rows(d, inl)
-    k, n = min(k_src, k_dst), min(n_src, n_dst)
-    p = chance_probability(fit.H, s, d, threshold, area)
-    lnfa = log10_nfa(k, n, p)
-    if not lnfa < math.log10(MAX_NFA):
-        raise EstimationError(
-            f"the best homography has {k} distinct inliers of {n} distinct matches ({fit.num_inliers} of {len(s)} "
-            f"in all) within {float(threshold):g} px, which is chance "
-            f"level (an unrelated match is an inlier with probability {p:.2g}; NFA 10^{lnfa:.1f} >= {MAX_NFA:g}): "
-            "the images do not seem to show the same plane; check that they overlap, or try another --detector "
-            "or more features"
-        )
-    return HomographyFit(H=fit.H, inliers=fit.inliers, iterations=fit.iterations, rms=fit.rms, log10_nfa=lnfa)
+    return _nfa_test(fit, as_points("src", src), as_points("dst", dst), threshold, area)
 
 
 # ----------------------------------------------------------------------------------------------- public API
