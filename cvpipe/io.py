@@ -128,6 +128,55 @@ def read_image(path: str | os.PathLike, mode: str = "color", max_pixels: int = D
     return img
 
 
+#: default upper bound on the size of a small text file we parse (a calibration file), bytes
+DEFAULT_MAX_TEXT_BYTES = 1_000_000
+
+
+@_about_file
+def read_text(path: str | os.PathLike, what: str = "text", max_bytes: int = DEFAULT_MAX_TEXT_BYTES) -> str:
+    """Read a small UTF-8 text file, refusing one over ``max_bytes`` without reading more than ``max_bytes + 1``.
+
+    Parameters
+    ----------
+    path : path-like
+        The file (a regular file, a pipe or a device such as ``/dev/zero``: at most ``max_bytes + 1`` bytes are read).
+    what : str
+        How the messages name its content, e.g. ``"calibration"``.
+    max_bytes : int
+        Largest accepted size, bytes.
+
+    Returns
+    -------
+    str
+        The file's text.
+
+    Raises
+    ------
+    InputError
+        Missing file, a folder, unreadable, over ``max_bytes``, not UTF-8 or holding NUL bytes.
+    """
+    if not isinstance(max_bytes, (int, np.integer)) or max_bytes <= 0:
+        raise ValueError(f"`max_bytes` must be a positive integer, got {max_bytes!r}")
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"{p}: no such file")
+    if p.is_dir():
+        raise InputError(f"{p}: is a folder, expected a {what} file")
+    try:
+        with open(p, "rb") as fh:
+            data = fh.read(max_bytes + 1)
+    except OSError as exc:
+        raise InputError(f"{p}: cannot read the {what} ({exc.strerror or exc})") from None
+    if len(data) > max_bytes:
+        raise InputError(f"{p}: the {what} file is larger than the limit of {max_bytes} bytes")
+    if b"\0" in data:
+        raise InputError(f"{p}: not a {what} file (it holds NUL bytes)")
+    try:
+        return data.decode("utf-8-sig")  # a byte-order mark is not part of the text
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{p}: not a UTF-8 {what} file (byte {exc.start} is {data[exc.start]:#04x})") from None
+
+
 def to_gray(img: np.ndarray) -> np.ndarray:
     """(H, W) uint8 grayscale from a gray, BGR or BGRA uint8 image."""
     if img.ndim == 2:

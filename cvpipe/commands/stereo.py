@@ -138,16 +138,15 @@ def _max_disp_arg(text: str):
 
 
 def _read_calib(path: str) -> calibration.Calibration:
-    from ..stereo import calibration
+    from .. import io
     from ..errors import InputError
+    from ..stereo import calibration
 
     try:
-        text = open(path, encoding="utf-8").read()
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read the calibration ({exc})") from None
-    return calibration.parse_calibration(text, path)
+        return calibration.parse_calibration(io.read_text(path, "calibration"), path)
+    except InputError as exc:
+        exc.file = exc.file or path
+        raise
 
 
 def _prepare(args, left, right, calib):
