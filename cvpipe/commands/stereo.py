@@ -101,13 +101,18 @@ def run(args: argparse.Namespace) -> int:
         compile_note("stereo", _kernels)
     with step(f"disparity ({method})"):
         disp = stereo.disparity_with(left, right, max_disp, params_cls(), method)
+    z = None
+    if geometry is not None:  # before anything is written: a calibration that gives no depth writes nothing
+        try:
+            z = depth_mod.depth_from_disparity(disp, geometry.focal, geometry.baseline, geometry.doffs)
+        except InputError as exc:
+            raise InputError(f"{args.calib}: {exc}", file=args.calib) from None
     _save_map(args.out, disp.astype(np.float32), 0.0, float(max_disp), "px", "disparity")
     out = {"valid_fraction": float(np.isfinite(disp).mean()), "max_disp": int(max_disp), "out": args.out, **info}
     if args.overlay:
         _save_map(args.overlay, disp.astype(np.float32), 0.0, float(max_disp), "px", "disparity")
         out["overlay"] = args.overlay
-    if geometry is not None:
-        z = depth_mod.depth_from_disparity(disp, geometry.focal, geometry.baseline, geometry.doffs)
+    if z is not None:
         out.update({"depth_unit": geometry.unit, "focal_px": geometry.focal, "baseline": geometry.baseline,
                     "doffs_px": geometry.doffs, "depth_exact": geometry.exact})
         if args.depth:
