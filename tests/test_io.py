@@ -122,6 +122,42 @@ def test_read_text_stops_after_the_limit_on_an_endless_file():
         io.read_text("/dev/zero", "calibration", max_bytes=1000)
 
 
+@pytest.mark.parametrize("orientation", range(1, 9))
+def test_orient_agrees_with_pillow(orientation):
+    from PIL import Image, ImageOps
+
+    img = (np.arange(5 * 7 * 3) % 251).astype(np.uint8).reshape(5, 7, 3)
+    pil = Image.fromarray(img)
+    exif = pil.getexif()
+    exif[io.EXIF_ORIENTATION] = orientation
+    pil.info["exif"] = exif.tobytes()
+    assert np.array_equal(io.orient(img, orientation), np.asarray(ImageOps.exif_transpose(pil)))
+
+
+@pytest.mark.parametrize("suffix, fmt", [(".jpg", "JPEG"), (".png", "PNG"), (".webp", "WEBP")])
+@pytest.mark.parametrize("orientation", [3, 6, 8])
+def test_exif_orientation_is_applied_in_every_mode(tmp_path, suffix, fmt, orientation):
+    from PIL import Image
+
+    # a smooth picture with one bright corner block: JPEG keeps it within a few grey levels
+    yy, xx = np.mgrid[0:48, 0:64]
+    img = np.dstack([xx * 3, yy * 4, (xx + yy) * 2]).astype(np.uint8)
+    img[:12, :16] = 255
+    exif = Image.Exif()
+    exif[io.EXIF_ORIENTATION] = orientation
+    path = tmp_path / f"turned{suffix}"
+    Image.fromarray(img[:, :, ::-1]).save(path, fmt, exif=exif.tobytes(),
+                                          **({"lossless": True} if fmt == "WEBP" else {"quality": 95} if fmt == "JPEG"
+                                             else {}))
+    upright = io.orient(img, orientation)
+    for mode in ("color", "unchanged", "gray"):
+        got = io.read_image(path, mode)
+        assert got.shape[:2] == upright.shape[:2], mode
+        want = upright if mode != "gray" else cv2.cvtColor(upright, cv2.COLOR_BGR2GRAY)
+        # lossless formats give the pixels back; JPEG's block coding is within a few levels on average
+        assert np.abs(got.astype(int) - want).mean() < (4 if fmt == "JPEG" else 1), mode
+
+
 def test_gray_and_bgr_conversion():
     g = np.zeros((5, 6), np.uint8)
     assert io.to_bgr(g).shape == (5, 6, 3)
