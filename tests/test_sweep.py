@@ -152,6 +152,18 @@ def test_sweep_exif_rotated_stereo_pair_is_read_upright(world, tmp_path, capsys)
     assert valid.size > 0.5 * disp.size and np.mean(np.abs(valid - 8.0) <= 1.0) > 0.9
 
 
+def test_sweep_blank_stereo_pair_has_no_valid_disparity(world, tmp_path, capsys):
+    """A uniform grey pair: nothing to match, so the answer is a map without a valid pixel (not a full one)."""
+    bad = {k: make("blank", v, tmp_path / "in", k) for k, v in world["views"].items()}
+    out = tmp_path / "out"
+    argv, product = argv_for("stereo", bad, world, out)
+    code = cli.main(argv)
+    captured = capsys.readouterr()
+    check_contract(code, captured.out, captured.err, (0, None), bad["a"], out, product)
+    assert json.loads(captured.out)["valid_fraction"] == 0.0
+    assert np.isnan(np.load(product)).all()
+
+
 # ------------------------------------------------------------------------------------------- 81 megapixels
 
 #: an 81 MP photo (9000 x 9000) is under the 100 MP limit, so every command must handle it within the memory
