@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from .errors import InputError
-from .io import IMAGE_SUFFIXES, load_json
+from .io import IMAGE_SUFFIXES, load_json, read_text
 
 TRUTH_FILE = "truth.json"
 
@@ -289,7 +289,11 @@ def _stereo_pair(d: Path, name: str) -> StereoPair | str:
                 raise InputError(f"{d / TRUTH_FILE}: field `max_disp` must be an integer >= 1, got {v!r}")
             max_disp = v
     if max_disp is None and calib is not None and calib.suffix == ".txt":
-        m = re.search(r"^\s*ndisp\s*=\s*(\d+)\s*$", calib.read_text(encoding="utf-8", errors="replace"), re.M)
+        try:
+            text = read_text(calib, "calibration")
+        except InputError:
+            text = ""  # stereo_rectify parses the file and drops the pair with the reason
+        m = re.search(r"^\s*ndisp\s*=\s*0*([1-9]\d{0,5})\s*$", text, re.M)
         if m:
             max_disp = int(m.group(1))
     truth = d / "truth.npz" if (d / "truth.npz").is_file() else None

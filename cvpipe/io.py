@@ -27,16 +27,27 @@ DEFAULT_MAX_PIXELS = 100_000_000
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp", ".pgm", ".ppm")
 #: smallest accepted side of an input image, in pixels
 MIN_SIDE = 8
-_MODES = {"color": cv2.IMREAD_COLOR, "gray": cv2.IMREAD_GRAYSCALE, "unchanged": cv2.IMREAD_UNCHANGED}
+# OpenCV applies the EXIF orientation in some modes and not in others (IMREAD_UNCHANGED): it is always left to
+# :func:`orient`, so that every mode reads the same picture upright
+_MODES = {"color": cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION,
+          "gray": cv2.IMREAD_GRAYSCALE | cv2.IMREAD_IGNORE_ORIENTATION, "unchanged": cv2.IMREAD_UNCHANGED}
+#: the EXIF tag that says how the stored pixels are turned
+EXIF_ORIENTATION = 0x0112
 
 
-def _header_size(path: Path, data: bytes) -> tuple[int, int] | None:
-    """(width, height) from the file header without decoding the pixels, or None if the header is not understood."""
+def _header(data: bytes) -> tuple[tuple[int, int] | None, int]:
+    """((width, height) or None, EXIF orientation 1..8) from the file header, without decoding the pixels.
+
+    The size is None when the header is not understood; the orientation is 1 (as stored) when the file has none,
+    an invalid one, one that only a full decode would reach (a PNG ``eXIf`` chunk after the pixel data), or is a
+    TIFF (OpenCV's TIFF decoder applies the orientation itself).
+    """
     try:
         from PIL import Image
     except ImportError:  # pragma: no cover - pillow comes with scikit-image
-        return None
+        return None, 1
     Image.MAX_IMAGE_PIXELS = None  # our own limit applies, with our own message
+    size, orientation = None, 1
     try:
         import io as _io
         import warnings
@@ -44,9 +55,42 @@ def _header_size(path: Path, data: bytes) -> tuple[int, int] | None:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # Pillow's complaints about corrupt metadata: our own checks follow
             with Image.open(_io.BytesIO(data)) as im:
-                return im.size
+                size = im.size
+                # OpenCV's TIFF decoder turns the pixels itself, in every mode; PNG's getexif() would decode them
+                if im.format != "TIFF" and (im.format != "PNG" or "exif" in im.info):
+                    value = im.getexif().get(EXIF_ORIENTATION, 1)
+                    orientation = value if isinstance(value, int) and 1 <= value <= 8 else 1
     except Exception:
-        return None
+        pass
+    return size, orientation
+
+
+def orient(img: np.ndarray, orientation: int) -> np.ndarray:
+    """The image turned upright from its EXIF ``orientation`` (1..8; 1 = as stored), as a contiguous array.
+
+    Parameters
+    ----------
+    img : (H, W) or (H, W, C) ndarray
+        The pixels as stored in the file.
+    orientation : int
+        The EXIF orientation tag: 2 mirrored, 3 turned 180 degrees, 4 flipped, 5 transposed, 6 to be turned 90
+        degrees clockwise, 7 transversed, 8 to be turned 90 degrees counter-clockwise; other values change nothing.
+
+    Returns
+    -------
+    ndarray
+        (W, H, ...) for orientations 5 to 8, else (H, W, ...).
+    """
+    turned = {
+        2: lambda a: a[:, ::-1],
+        3: lambda a: a[::-1, ::-1],
+        4: lambda a: a[::-1],
+        5: lambda a: a.swapaxes(0, 1),
+        6: lambda a: np.rot90(a, -1),
+        7: lambda a: a[::-1, ::-1].swapaxes(0, 1),
+        8: lambda a: np.rot90(a, 1),
+    }.get(orientation)
+    return img if turned is None else np.ascontiguousarray(turned(img))
 
 
 def _looks_truncated(data: bytes) -> bool:
@@ -89,7 +133,7 @@ def read_image(path: str | os.PathLike, mode: str = "color", max_pixels: int = D
     Returns
     -------
     ndarray
-        The decoded image.
+        The decoded image, upright: its EXIF orientation applied in every mode (:func:`orient`).
 
     Raises
     ------
@@ -108,7 +152,7 @@ def read_image(path: str | os.PathLike, mode: str = "color", max_pixels: int = D
     data = p.read_bytes()
     if not data:
         raise InputError(f"{p}: file is empty (0 bytes), expected an image")
-    size = _header_size(p, data)
+    size, orientation = _header(data)
     if size is not None and size[0] * size[1] > max_pixels:
         raise InputError(
             f"{p}: {size[0]}x{size[1]} = {size[0] * size[1]} pixels exceeds the limit of {max_pixels} pixels"
@@ -118,6 +162,7 @@ def read_image(path: str | os.PathLike, mode: str = "color", max_pixels: int = D
     img = cv2.imdecode(np.frombuffer(data, np.uint8), _MODES[mode])
     if img is None or img.size == 0:
         raise InputError(f"{p}: not a readable image (expected PNG, JPEG, BMP, TIFF, WebP or PGM/PPM)")
+    img = orient(img, orientation)
     h, w = img.shape[:2]
     if h * w > max_pixels:
         raise InputError(f"{p}: {w}x{h} = {w * h} pixels exceeds the limit of {max_pixels} pixels")
@@ -126,6 +171,55 @@ def read_image(path: str | os.PathLike, mode: str = "color", max_pixels: int = D
     if mode != "unchanged" and img.dtype != np.uint8:
         img = cv2.convertScaleAbs(img, alpha=255.0 / float(np.iinfo(img.dtype).max))
     return img
+
+
+#: default upper bound on the size of a small text file we parse (a calibration file), bytes
+DEFAULT_MAX_TEXT_BYTES = 1_000_000
+
+
+@_about_file
+def read_text(path: str | os.PathLike, what: str = "text", max_bytes: int = DEFAULT_MAX_TEXT_BYTES) -> str:
+    """Read a small UTF-8 text file, refusing one over ``max_bytes`` without reading more than ``max_bytes + 1``.
+
+    Parameters
+    ----------
+    path : path-like
+        The file (a regular file, a pipe or a device such as ``/dev/zero``: at most ``max_bytes + 1`` bytes are read).
+    what : str
+        How the messages name its content, e.g. ``"calibration"``.
+    max_bytes : int
+        Largest accepted size, bytes.
+
+    Returns
+    -------
+    str
+        The file's text.
+
+    Raises
+    ------
+    InputError
+        Missing file, a folder, unreadable, over ``max_bytes``, not UTF-8 or holding NUL bytes.
+    """
+    if not isinstance(max_bytes, (int, np.integer)) or max_bytes <= 0:
+        raise ValueError(f"`max_bytes` must be a positive integer, got {max_bytes!r}")
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"{p}: no such file")
+    if p.is_dir():
+        raise InputError(f"{p}: is a folder, expected a {what} file")
+    try:
+        with open(p, "rb") as fh:
+            data = fh.read(max_bytes + 1)
+    except OSError as exc:
+        raise InputError(f"{p}: cannot read the {what} ({exc.strerror or exc})") from None
+    if len(data) > max_bytes:
+        raise InputError(f"{p}: the {what} file is larger than the limit of {max_bytes} bytes")
+    if b"\0" in data:
+        raise InputError(f"{p}: not a {what} file (it holds NUL bytes)")
+    try:
+        return data.decode("utf-8-sig")  # a byte-order mark is not part of the text
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{p}: not a UTF-8 {what} file (byte {exc.start} is {data[exc.start]:#04x})") from None
 
 
 def to_gray(img: np.ndarray) -> np.ndarray:

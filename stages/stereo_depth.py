@@ -31,7 +31,8 @@ def stereo_depth(st: Stage) -> None:
             left = io.read_image(rectified / name / "left.png")
             xyz, rgb = depth.point_cloud(z, left, geo["focal"], geo["cx"], geo["cy"])
         except InputError as exc:
-            st.drop(name, f"no depth: {exc}")
+            calib = rects[name].get("calib")
+            st.drop(name, f"no depth: {calib + ': ' if calib else ''}{exc}")
             continue
         with io.atomic_path(out / name / "depth.npy") as tmp:
             with open(tmp, "wb") as fh:

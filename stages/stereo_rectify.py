@@ -24,10 +24,10 @@ def stereo_rectify(st: Stage) -> None:
         for pair in pairs:
             try:
                 left, right = io.read_image(pair.left), io.read_image(pair.right)
-                calib = None if pair.calib is None else pair.calib.read_text(encoding="utf-8")
+                calib = None if pair.calib is None else io.read_text(pair.calib, "calibration")
                 yield left, right, calib, None if pair.calib is None else str(pair.calib)
-            except (InputError, UnicodeDecodeError) as exc:
-                yield exc if isinstance(exc, InputError) else InputError(str(exc))
+            except InputError as exc:
+                yield exc
 
     for name, (got, seconds) in st.map(stereo.rectify_item, pair_data(), shared=p, desc="rectify",
                                        names=[q.name for q in pairs]):

@@ -66,6 +66,16 @@ def make(kind: str, good: np.ndarray, folder: Path, name: str) -> Path:
         cv2.imwrite(str(p), np.dstack([good, np.full(good.shape[:2], 255, np.uint8)]))
     elif kind == "grey":
         cv2.imwrite(str(p), cv2.cvtColor(good, cv2.COLOR_BGR2GRAY))
+    elif kind == "exif_rotated":
+        # stored turned 90 degrees counter-clockwise, with the EXIF orientation 6 that says "turn it clockwise to
+        # view": read upright, it is the good image again (as a camera held sideways writes its JPEGs)
+        from PIL import Image
+
+        p = folder / f"{name}.jpg"
+        exif = Image.Exif()
+        exif[0x0112] = 6
+        stored = np.ascontiguousarray(np.rot90(good, 1)[:, :, ::-1])
+        Image.fromarray(stored).save(p, "JPEG", quality=95, exif=exif.tobytes())
     elif kind == "over_limit":
         png_header_only(p, 20_000, 10_000)  # 200 MP declared, a few bytes on disk
     else:

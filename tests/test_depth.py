@@ -2,6 +2,7 @@
 --rectify / --calib / --depth / --ply end to end on the unrectified motorcycle sample."""
 
 import json
+import warnings
 
 import cv2
 import numpy as np
@@ -28,6 +29,39 @@ class TestDepth:
             depth.depth_from_disparity(np.zeros((2, 2), np.float32), 1.0, -1.0)
         with pytest.raises(InputError, match="`disp` must be a 2-D float"):
             depth.depth_from_disparity(np.zeros((2, 2), np.uint8), 1.0, 1.0)
+
+    @pytest.mark.parametrize("focal, baseline, doffs", [
+        (1e300, 193.0, 31.0),  # every depth overflows: +inf
+        (995.0, 1e300, 31.0),  # the same through the baseline
+        (995.0, 1e-300, 31.0),  # every depth rounds to 0
+        (995.0, 193.0, -600.0),  # d + doffs <= 0 everywhere: at or beyond infinity
+    ])
+    def test_absurd_geometry_is_refused_without_warnings(self, focal, baseline, doffs):
+        d = np.tile(np.linspace(0.0, 60.0, 50, dtype=np.float32), (20, 1))
+        d[0, 0] = np.nan
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # no numpy RuntimeWarning may reach stderr
+            with pytest.raises(InputError, match=r"no pixel has a usable depth: `focal` .* `baseline` .* `doffs`"):
+                depth.depth_from_disparity(d, focal, baseline, doffs)
+
+    def test_depths_beyond_float32_are_invalid(self):
+        d = np.array([[1e-30, 10.0]], np.float32)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            z = depth.depth_from_disparity(d, 1e10, 1e10)  # 1e20 / 1e-30 overflows float32; 1e20 / 10 does not
+        assert np.isnan(z[0, 0]) and z[0, 1] == pytest.approx(1e19, rel=1e-6)
+
+    def test_no_valid_disparity_is_not_a_calibration_error(self):
+        z = depth.depth_from_disparity(np.full((4, 5), np.nan, np.float32), 995.0, 193.0, 31.0)
+        assert np.isnan(z).all()
+
+    def test_point_cloud_leaves_out_points_beyond_float32(self):
+        z = np.array([[3e38, 1000.0]], np.float32)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            xyz, rgb = depth.point_cloud(z, np.zeros((1, 2), np.uint8), focal=1e-3, cx=-100.0, cy=0.0)
+        # X = (u - cx) Z / f is 3e43 for the first pixel: beyond float32, left out
+        assert len(xyz) == 1 and xyz[0, 2] == 1000.0 and len(rgb) == 1
 
     def test_point_cloud_reprojects_onto_its_pixels(self):
         rng = np.random.default_rng(0)

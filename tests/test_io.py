@@ -1,6 +1,7 @@
 """cvpipe.io: every validation branch names the file and says what was expected; writers are atomic."""
 
 import json
+import os
 
 import cv2
 import numpy as np
@@ -86,6 +87,75 @@ def test_sixteen_bit_is_scaled_to_uint8(tmp_path):
     img = io.read_image(p, "gray")
     assert img.dtype == np.uint8 and img.max() == 255
     assert io.read_image(p, "unchanged").dtype == np.uint16
+
+
+def test_read_text_roundtrip_and_byte_order_mark(tmp_path):
+    f = tmp_path / "calib.txt"
+    f.write_bytes(b"\xef\xbb\xbfwidth=320\n")
+    assert io.read_text(f, "calibration") == "width=320\n"
+
+
+def test_read_text_refusals_name_the_file(tmp_path):
+    with pytest.raises(InputError, match=r"nope\.txt: no such file") as info:
+        io.read_text(tmp_path / "nope.txt")
+    assert info.value.file == str(tmp_path / "nope.txt")
+    with pytest.raises(InputError, match="is a folder, expected a calibration file"):
+        io.read_text(tmp_path, "calibration")
+    big = tmp_path / "big.txt"
+    big.write_text("x" * 101)
+    with pytest.raises(InputError, match=r"big\.txt: the calibration file is larger than the limit of 100 bytes"):
+        io.read_text(big, "calibration", max_bytes=100)
+    (tmp_path / "nul.txt").write_bytes(b"a=1\0")
+    with pytest.raises(InputError, match="holds NUL bytes"):
+        io.read_text(tmp_path / "nul.txt")
+    (tmp_path / "latin.txt").write_bytes(b"caf\xe9=1\n")
+    with pytest.raises(InputError, match=r"latin\.txt: not a UTF-8 text file \(byte 3 is 0xe9\)"):
+        io.read_text(tmp_path / "latin.txt")
+    with pytest.raises(ValueError, match="`max_bytes` must be a positive integer"):
+        io.read_text(big, max_bytes=0)
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/zero"), reason="no /dev/zero")
+def test_read_text_stops_after_the_limit_on_an_endless_file():
+    # /dev/zero never ends: only max_bytes + 1 bytes are read, then the file is refused
+    with pytest.raises(InputError, match="/dev/zero: the calibration file is larger than the limit of 1000 bytes"):
+        io.read_text("/dev/zero", "calibration", max_bytes=1000)
+
+
+@pytest.mark.parametrize("orientation", range(1, 9))
+def test_orient_agrees_with_pillow(orientation):
+    from PIL import Image, ImageOps
+
+    img = (np.arange(5 * 7 * 3) % 251).astype(np.uint8).reshape(5, 7, 3)
+    pil = Image.fromarray(img)
+    exif = pil.getexif()
+    exif[io.EXIF_ORIENTATION] = orientation
+    pil.info["exif"] = exif.tobytes()
+    assert np.array_equal(io.orient(img, orientation), np.asarray(ImageOps.exif_transpose(pil)))
+
+
+@pytest.mark.parametrize("suffix, fmt", [(".jpg", "JPEG"), (".png", "PNG"), (".webp", "WEBP")])
+@pytest.mark.parametrize("orientation", [3, 6, 8])
+def test_exif_orientation_is_applied_in_every_mode(tmp_path, suffix, fmt, orientation):
+    from PIL import Image
+
+    # a smooth picture with one bright corner block: JPEG keeps it within a few grey levels
+    yy, xx = np.mgrid[0:48, 0:64]
+    img = np.dstack([xx * 3, yy * 4, (xx + yy) * 2]).astype(np.uint8)
+    img[:12, :16] = 255
+    exif = Image.Exif()
+    exif[io.EXIF_ORIENTATION] = orientation
+    path = tmp_path / f"turned{suffix}"
+    Image.fromarray(img[:, :, ::-1]).save(path, fmt, exif=exif.tobytes(),
+                                          **({"lossless": True} if fmt == "WEBP" else {"quality": 95} if fmt == "JPEG"
+                                             else {}))
+    upright = io.orient(img, orientation)
+    for mode in ("color", "unchanged", "gray"):
+        got = io.read_image(path, mode)
+        assert got.shape[:2] == upright.shape[:2], mode
+        want = upright if mode != "gray" else cv2.cvtColor(upright, cv2.COLOR_BGR2GRAY)
+        # lossless formats give the pixels back; JPEG's block coding is within a few levels on average
+        assert np.abs(got.astype(int) - want).mean() < (4 if fmt == "JPEG" else 1), mode
 
 
 def test_gray_and_bgr_conversion():

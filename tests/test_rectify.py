@@ -198,6 +198,133 @@ class TestOpenCVCalib:
             calibration.parse_opencv_calib("%YAML:1.0\nK1: [unclosed\n", "bad.yml")
 
 
+def _yaml_matrix(rows, cols, data):
+    return f"!!opencv-matrix\n   rows: {rows}\n   cols: {cols}\n   dt: d\n   data: [ {data} ]\n"
+
+
+def _opencv_text(**change):
+    """A valid OpenCV stereo YAML of a 640x480 rig with some keys' values replaced (text after ``key: ``)."""
+    values = {"image_width": "640\n", "image_height": "480\n",
+              "K1": _yaml_matrix(3, 3, "600., 0., 319.5, 0., 600., 239.5, 0., 0., 1."),
+              "D1": _yaml_matrix(1, 5, "0., 0., 0., 0., 0."),
+              "K2": _yaml_matrix(3, 3, "600., 0., 319.5, 0., 600., 239.5, 0., 0., 1."),
+              "D2": _yaml_matrix(1, 5, "0., 0., 0., 0., 0."),
+              "R": _yaml_matrix(3, 3, "1., 0., 0., 0., 1., 0., 0., 0., 1."),
+              "T": _yaml_matrix(3, 1, "-0.1, 0., 0.")}
+    values.update(change)
+    return "%YAML:1.0\n---\n" + "".join(f"{k}: {v}" for k, v in values.items() if v is not None)
+
+
+class TestCalibrationLimits:
+    """Every value of a calibration file is checked for finiteness and range; the message names file and key."""
+
+    @pytest.mark.parametrize("old, new, match", [
+        ("width=741", "width=1e400", r"c\.txt: `width` must be an integer in \[2, 1000000\], got '1e400'"),
+        ("width=741", "width=384.7", r"`width` must be an integer in \[2, 1000000\], got '384\.7'"),
+        ("height=500", "height=-5", r"`height` must be an integer in \[2, 1000000\], got '-5'"),
+        ("ndisp=64", "ndisp=1e400", r"`ndisp` must be an integer in \[1, 741\], got '1e400'"),
+        ("ndisp=64", "ndisp=0", r"`ndisp` must be an integer in \[1, 741\], got '0'"),
+        ("ndisp=64", "ndisp=5000", r"`ndisp` must be an integer in \[1, 741\]"),
+        ("baseline=193.001", "baseline=inf", r"`baseline` must be finite, got 'inf'"),
+        ("baseline=193.001", "baseline=0", r"`baseline` must be > 0, got 0"),
+        ("doffs=31.086", "doffs=nan", r"`doffs` must be finite"),
+        ("doffs=31.086", "doffs=-1e9", r"`doffs` must be in \[-1482, 1482\] \(twice the width\), got -1e\+09"),
+        ("[994.978 0 311.193;", "[994.978 0 1e300;", r"`cam0` principal point cx = 1e\+300 must be in "
+                                                      r"\[-370\.5, 1111\.5\]"),
+        ("0 994.978 254.877; 0 0 1]\ncam1", "0 994.978 -1e5; 0 0 1]\ncam1", r"`cam0` principal point cy"),
+        ("0 994.978 254.877; 0 0 1]\ncam1", "0 -994.978 254.877; 0 0 1]\ncam1",
+         r"`cam0` focal length fy = -994\.978 must be > 0"),
+        ("[994.978 0 342.279;", "[0 0 342.279;", r"`cam1` focal length fx = 0 must be > 0"),
+        ("0 0 1]\ncam1", "0 0 0]\ncam1", r"`cam0`\[2, 2\] must be 1 .*got 0"),
+        ("0 0 1]\ncam1", "0.5 0 1]\ncam1", r"`cam0` must have zeros below the diagonal"),
+        ("0 0 1]\ncam1", "0 0 nan]\ncam1", r"`cam0` contains NaN or inf"),
+    ])
+    def test_middlebury_values(self, old, new, match):
+        assert old in MIDDLEBURY
+        with pytest.raises(InputError, match=match) as info:
+            calibration.parse_calibration(MIDDLEBURY.replace(old, new), "c.txt")
+        assert info.value.file == "c.txt"
+
+    @pytest.mark.parametrize("change, match", [
+        ({"K1": "[1, 2, 3]\n"}, r"`K1` must be a 3x3 matrix \(!!opencv-matrix .*\), got a list of 3 values"),
+        ({"K2": "5\n"}, r"`K2` must be a 3x3 matrix .*got a single value"),
+        ({"K1": _yaml_matrix(1, 3, "1., 2., 3.")}, r"`K1` must have 9 entries"),
+        ({"K1": _yaml_matrix(3, 3, "0., 0., 0., 0., 0., 0., 0., 0., 0.")}, r"`K1` focal length fx = 0 must be > 0"),
+        ({"K2": _yaml_matrix(3, 3, "600., 0., 319.5, 0., -600., 239.5, 0., 0., 1.")}, r"`K2` focal length fy"),
+        ({"K1": _yaml_matrix(3, 3, "600., 0., 319.5, 0., 600., 239.5, 0., 0., 0.")}, r"`K1`\[2, 2\] must be 1"),
+        ({"K1": _yaml_matrix(3, 3, "600., 0., 1e300, 0., 600., 239.5, 0., 0., 1.")},
+         r"`K1` principal point cx = 1e\+300 must be in \[-320, 960\]"),
+        ({"image_width": ".inf\n"}, r"`image_width` must be an integer in \[2, 1000000\], got inf"),
+        ({"image_height": "480.5\n"}, r"`image_height` must be an integer in \[2, 1000000\], got 480\.5"),
+        ({"image_width": "wide\n"}, r"`image_width` must be an integer in \[2, 1000000\], got 'wide'"),
+        ({"R": _yaml_matrix(3, 3, "-1., 0., 0., 0., 1., 0., 0., 0., 1.")}, r"`R` is not a rotation matrix"),
+        ({"T": _yaml_matrix(3, 1, "0., 0., 0.")}, r"`T` is zero"),
+        ({"D1": _yaml_matrix(1, 5, "0., .nan, 0., 0., 0.")}, r"`D1` contains NaN or inf"),
+    ])
+    def test_opencv_values(self, change, match):
+        with pytest.raises(InputError, match=match) as info:
+            calibration.parse_calibration(_opencv_text(**change), "rig.yml")
+        assert info.value.file == "rig.yml"
+
+    def test_valid_files_pass(self):
+        assert calibration.parse_calibration(_opencv_text(), "rig.yml").size == (640, 480)
+        assert calibration.parse_calibration(MIDDLEBURY.replace("width=741", "width=741.0"), "c.txt").size == \
+            (741, 500)
+
+    def test_principal_point_checked_against_the_images_when_the_file_gives_no_size(self):
+        text = _opencv_text(image_width=None, image_height=None,
+                            K2=_yaml_matrix(3, 3, "600., 0., 2000., 0., 600., 239.5, 0., 0., 1."))
+        c = calibration.parse_calibration(text, "rig.yml")  # no size in the file: nothing to check cx against yet
+        with pytest.raises(InputError, match=r"rig\.yml: `K2` principal point cx = 2000 must be in \[-320, 960\]"):
+            c.check_size((640, 480))
+
+    def test_nesting_bound_of_real_files_is_small(self, tmp_path):
+        f = tmp_path / "stereo.yml"
+        write_opencv_yaml(f)
+        fs = cv2.FileStorage("x.xml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
+        fs.write("K1", K)
+        # written by OpenCV: two or three levels; a bound of at most 10 leaves the limit (64) far away
+        for text in (f.read_text(), fs.releaseAndGetString(), MIDDLEBURY, _opencv_text()):
+            assert calibration.nesting_bound(text) <= 10
+
+    @pytest.mark.parametrize("text", [
+        "%YAML:1.0\nK1: " + "[" * 100 + "]" * 100 + "\n",
+        "%YAML:1.0\nK1: " + "{a: " * 100 + "1" + "}" * 100 + "\n",
+        "%YAML:1.0\nK1:\n  " + "- " * 100 + "1\n",
+        "%YAML:1.0\n" + "".join(" " * i + "a:\n" for i in range(100)),
+        '<?xml version="1.0"?>\n<opencv_storage>' + "<a>" * 100 + "</a>" * 100 + "</opencv_storage>\n",
+        "]]]]" + "[" * 100,  # surplus closing brackets first do not hide the nesting that follows
+    ])
+    def test_deep_nesting_refused_before_parsing(self, text):
+        # 100 levels: deep enough to be refused, far too shallow to crash a parser if it were reached
+        assert calibration.nesting_bound(text) >= 100
+        with pytest.raises(InputError, match=r"deep\.yml: brackets, elements or blocks nested about \d+ levels "
+                                             r"deep, over the limit of 64"):
+            calibration.parse_calibration(text, "deep.yml")
+
+    def test_text_over_the_limit(self):
+        with pytest.raises(InputError, match=r"big\.txt: the calibration is \d+ characters long, over the limit of "
+                                             r"1000000"):
+            calibration.parse_calibration("#" * 1_000_001, "big.txt")
+
+    def test_absurd_magnitudes_give_no_rectification(self):
+        huge = _yaml_matrix(3, 3, "1e300, 0., 319.5, 0., 1e300, 239.5, 0., 0., 1.")
+        c = calibration.parse_calibration(_opencv_text(K1=huge, K2=huge, R=_yaml_matrix(
+            3, 3, "0.9998, 0., 0.0175, 0., 1., 0., -0.0175, 0., 0.9998")), "rig.yml")
+        with pytest.raises(InputError, match=r"rig\.yml: `K1`, `K2`, `R` and `T` give no finite rectification"):
+            rectify.rectify_calibrated(c, (640, 480))
+
+    def test_baseline_of_extreme_translations_does_not_overflow(self):
+        import warnings
+
+        c = calibration.parse_calibration(MIDDLEBURY.replace("baseline=193.001", "baseline=1e300"), "c.txt")
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            assert c.baseline == 1e300
+            assert calibration.parse_calibration(MIDDLEBURY.replace("baseline=193.001", "baseline=1e-300"),
+                                                 "c.txt").baseline == 1e-300
+
+
 class TestRectifiedGeometry:
     def test_opencv_rig_must_be_rectified_to_be_used_as_is(self, tmp_path):
         f = tmp_path / "stereo.yml"

@@ -107,6 +107,35 @@ def test_colour_pair_and_fill():
     assert np.mean(err[inner & ~edges] < 0.5) > 0.995
 
 
+@pytest.mark.parametrize("fill", [False, True])
+def test_uniform_pair_has_no_valid_disparity(fill):
+    grey = np.full((60, 90, 3), 128, np.uint8)
+    disp = stereo.disparity_sgm(grey, grey, 16, fill=fill)
+    # every cost is 0 at every disparity: nothing to match, so no pixel may claim an estimate
+    assert disp.shape == (60, 90) and np.isnan(disp).all()
+
+
+def test_flat_patch_in_a_textured_pair_is_rejected_and_the_rest_kept():
+    left, right, truth = random_dot_pair(constant(7.0))
+    left[30:60, 60:100] = 90  # a flat patch: left(x, y) = right(x - 7, y) there too
+    right[30:60, 53:93] = 90
+    disp = stereo.disparity_sgm(left, right, MAX_DISP)
+    flat = stereo.textureless(left, (5, 7))  # the default census window of disparity_sgm
+    assert flat[35:55, 66:95].all() and not flat[:20].any()
+    assert np.isnan(disp[flat]).all()
+    inner = interior(left.shape) & ~cv2.dilate(flat.astype(np.uint8), np.ones((9, 11), np.uint8)).astype(bool)
+    # the textured rest is untouched: as on the plain plane, every interior pixel within half a pixel
+    assert np.isfinite(disp[inner]).all() and np.abs(disp[inner] - truth[inner]).max() < 0.5
+
+
+def test_textureless_window():
+    g = np.zeros((9, 11), np.uint8)
+    g[4, 5] = 1
+    flat = stereo.textureless(g, (3, 5))
+    # the single non-zero pixel makes every window that holds it non-flat: 3 rows x 5 columns around it
+    assert (~flat).sum() == 15 and not flat[3:6, 3:8].any()
+
+
 def test_fill_invalid_takes_the_background():
     d = np.array([[5.0, np.nan, np.nan, 2.0], [np.nan, 3.0, np.nan, np.nan], [np.nan] * 4], np.float32)
     out = stereo.fill_invalid(d)

@@ -231,3 +231,67 @@ def test_report_summary(pipeline):
     assert {"tilted_rectified.png", "tilted_depth.png", "bike_rectified.png", "bike.png", "tilted.png"} <= names
     assert "tilted_depth.png" in names and "bike_depth.png" not in names
     assert {r["pair"] for r in io.load_json(root / "plots/vertical_error.json")} == {"bike", "rig", "tilted"}
+
+
+def _middlebury_text(**change: str) -> str:
+    """The motorcycle rig's Middlebury calib.txt (741x500), with some values changed."""
+    c = samples.MOTORCYCLE_CALIB
+    values = {"cam0": f"[{c['focal']} 0 {c['cx']}; 0 {c['focal']} {c['cy']}; 0 0 1]",
+              "cam1": f"[{c['focal']} 0 {c['cx'] + c['doffs']}; 0 {c['focal']} {c['cy']}; 0 0 1]",
+              "doffs": str(c["doffs"]), "baseline": str(c["baseline"]), "width": "741", "height": "500", "ndisp": "64"}
+    values.update(change)
+    return "".join(f"{k}={v}\n" for k, v in values.items())
+
+
+def test_bad_calibrations_drop_their_pair_and_the_others_go_on(tmp_path, repo_root):
+    """stereo_rectify drops a pair whose calibration file is refused (too big, nested 40,000 levels deep, a value
+    out of range), naming the file and the key; stereo_depth drops a pair whose calibration gives no usable depth.
+    stereo_rectify runs in a child process: a parser crash there must not take pytest with it."""
+    import os
+    import subprocess
+
+    rect = samples.make_stereo()
+    calibs = {
+        "good": ("calib.txt", _middlebury_text()),
+        "absurd": ("calib.txt", _middlebury_text(cam0="[1e300 0 311.193; 0 1e300 254.877; 0 0 1]")),
+        "wide": ("calib.txt", _middlebury_text(width="1e400")),
+        "k1list": ("calib.yml", "%YAML:1.0\nK1: [1, 2, 3]\n"),
+        "deep": ("calib.yml", "%YAML:1.0\nK1: " + "[" * 40_000 + "]" * 40_000 + "\n"),
+        "huge": ("calib.txt", "# padding\n" * 200_000 + _middlebury_text()),
+    }
+    for pair, (name, text) in calibs.items():
+        for side in ("left.png", "right.png"):
+            io.save_image(tmp_path / "pairs" / pair / side, rect.images[side])
+        (tmp_path / "pairs" / pair / name).write_text(text)
+    (tmp_path / "params.yaml").write_text((repo_root / "params.yaml").read_text())
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(repo_root), os.environ.get("PYTHONPATH", "")]))
+    proc = subprocess.run([sys.executable, "-m", "stages.stereo_rectify", "--pairs", "pairs", "--out",
+                           "out/rectified", "--metrics", "m_rect.json"], cwd=tmp_path, env=env, capture_output=True,
+                          text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr
+    run = io.load_json(tmp_path / "out/rectified/run.json")
+    assert set(run["pairs"]) == {"good", "absurd"}
+    reasons = {d["item"]: d["reason"] for d in run["dropped"]}
+    assert set(reasons) == {"wide", "k1list", "deep", "huge"}
+    for pair, fragment in (("wide", "`width` must be an integer in [2, 1000000], got '1e400'"),
+                           ("k1list", "`K1` must be a 3x3 matrix"), ("deep", "over the limit of 64"),
+                           ("huge", "larger than the limit of 1000000 bytes")):
+        assert calibs[pair][0] in reasons[pair] and pair in reasons[pair] and fragment in reasons[pair], reasons
+        assert "\n" not in reasons[pair]
+        assert not (tmp_path / "out/rectified" / pair).exists()
+    old = Path.cwd()
+    os.chdir(tmp_path)
+    try:
+        _stage("stages.stereo_disparity", "--pairs", "pairs", "--rectified", "out/rectified", "--method",
+               "opencv_bm", "--out", "out/opencv_bm", "--metrics", "m_bm.json")
+        _stage("stages.stereo_depth", "--rectified", "out/rectified", "--disparities", "out/opencv_bm", "--out",
+               "out/depth", "--metrics", "m_depth.json")
+    finally:
+        os.chdir(old)
+    run = io.load_json(tmp_path / "out/depth/run.json")
+    assert set(run["pairs"]) == {"good"}
+    (dropped,) = run["dropped"]
+    assert dropped["item"] == "absurd"
+    assert "absurd/calib.txt: no pixel has a usable depth: `focal` 1e+300" in dropped["reason"]
+    assert not (tmp_path / "out/depth/absurd").exists()

@@ -101,13 +101,18 @@ def run(args: argparse.Namespace) -> int:
         compile_note("stereo", _kernels)
     with step(f"disparity ({method})"):
         disp = stereo.disparity_with(left, right, max_disp, params_cls(), method)
+    z = None
+    if geometry is not None:  # before anything is written: a calibration that gives no depth writes nothing
+        try:
+            z = depth_mod.depth_from_disparity(disp, geometry.focal, geometry.baseline, geometry.doffs)
+        except InputError as exc:
+            raise InputError(f"{args.calib}: {exc}", file=args.calib) from None
     _save_map(args.out, disp.astype(np.float32), 0.0, float(max_disp), "px", "disparity")
     out = {"valid_fraction": float(np.isfinite(disp).mean()), "max_disp": int(max_disp), "out": args.out, **info}
     if args.overlay:
         _save_map(args.overlay, disp.astype(np.float32), 0.0, float(max_disp), "px", "disparity")
         out["overlay"] = args.overlay
-    if geometry is not None:
-        z = depth_mod.depth_from_disparity(disp, geometry.focal, geometry.baseline, geometry.doffs)
+    if z is not None:
         out.update({"depth_unit": geometry.unit, "focal_px": geometry.focal, "baseline": geometry.baseline,
                     "doffs_px": geometry.doffs, "depth_exact": geometry.exact})
         if args.depth:
@@ -138,16 +143,15 @@ def _max_disp_arg(text: str):
 
 
 def _read_calib(path: str) -> calibration.Calibration:
-    from ..stereo import calibration
+    from .. import io
     from ..errors import InputError
+    from ..stereo import calibration
 
     try:
-        text = open(path, encoding="utf-8").read()
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: cannot read the calibration ({exc})") from None
-    return calibration.parse_calibration(text, path)
+        return calibration.parse_calibration(io.read_text(path, "calibration"), path)
+    except InputError as exc:
+        exc.file = exc.file or path
+        raise
 
 
 def _prepare(args, left, right, calib):

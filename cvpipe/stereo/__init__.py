@@ -6,8 +6,8 @@
 - :mod:`~cvpipe.stereo.rectify`: uncalibrated (Hartley + Loop-Zhang) and calibrated rectification
   (``rectify_uncalibrated``, ``rectify_calibrated``, ``warp_pair``);
 - :mod:`~cvpipe.stereo.pipeline`: the per-pair rectify step of the pipeline (``rectify_pair``);
-- :mod:`~cvpipe.stereo.sgm`: our semi-global matching (``disparity_sgm``, ``fill_invalid``), whose numba kernels
-  are in :mod:`~cvpipe.stereo._kernels`;
+- :mod:`~cvpipe.stereo.sgm`: our semi-global matching (``disparity_sgm``, ``fill_invalid``, ``textureless``), whose
+  numba kernels are in :mod:`~cvpipe.stereo._kernels`;
 - :mod:`~cvpipe.stereo.opencv_baseline`: OpenCV's block matching and SGBM, and the method registry
   (``METHODS``, ``compute_disparity``; ``disparity_with`` with the ``stereo.<method>`` section, ``METHOD_SECTIONS``);
 - :mod:`~cvpipe.stereo.depth`: depth from disparity, the point cloud and its PLY bytes, colour-mapped pictures;
@@ -41,10 +41,10 @@ from .report import (BAD_THRESHOLDS, TRUTH_KEYS, colorize_disparity, comparison_
                      depth_picture, depth_result, error_picture, evaluate, extend_summary, merge_dropped,
                      metric_key, metrics_of, pair_result, quality_plots, rectification_picture, rectify_metrics,
                      report_summary, to_png16, vertical_error_plot)
-from .sgm import disparity_sgm, fill_invalid
+from .sgm import disparity_sgm, fill_invalid, textureless
 
 __all__ = [
-    "disparity_sgm", "fill_invalid",
+    "disparity_sgm", "fill_invalid", "textureless",
     "METHODS", "METHOD_SECTIONS", "SGBM_MODES", "compute_disparity", "disparity_with", "disparity_opencv_bm",
     "disparity_opencv_sgbm",
     "FundamentalFit", "eight_point", "seven_point", "sampson_distance", "sampson_least_squares", "epipoles",

@@ -38,19 +38,32 @@ def depth_from_disparity(disp, focal: float, baseline: float, doffs: float = 0.0
     Returns
     -------
     (H, W) float32
-        Depth; NaN where the disparity is NaN or ``d + doffs <= 0`` (a point at or beyond infinity).
+        Depth; NaN where the disparity is NaN, where ``d + doffs <= 0`` (a point at or beyond infinity) and where
+        the depth is not a positive finite float32 (it rounds to 0 or overflows).
+
+    Raises
+    ------
+    InputError
+        ``focal``, ``baseline`` or ``doffs`` out of range, or a disparity with valid pixels none of which has a
+        usable depth (every depth would be inf, 0 or undefined): the calibration does not fit the disparity.
     """
     d = _check_disp(disp)
     for name, v in (("focal", focal), ("baseline", baseline)):
         if not (isinstance(v, (int, float, np.floating)) and math.isfinite(v) and v > 0):
             raise InputError(f"`{name}` must be a finite number > 0, got {v!r}")
-    if not math.isfinite(doffs):
+    if not (isinstance(doffs, (int, float, np.floating)) and math.isfinite(doffs)):
         raise InputError(f"`doffs` must be finite, got {doffs!r}")
     den = d.astype(np.float64) + float(doffs)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = float(focal) * float(baseline) / den
-    z[~(den > 0)] = np.nan
-    return z.astype(np.float32)
+    with np.errstate(all="ignore"):  # a huge focal x baseline or a tiny d + doffs: handled just below
+        z = (float(focal) * float(baseline) / den).astype(np.float32)
+        usable = (den > 0) & np.isfinite(z) & (z > 0)
+    z[~usable] = np.nan
+    if not usable.any() and np.isfinite(d).any():
+        lo, hi = float(np.nanmin(d)), float(np.nanmax(d))
+        raise InputError(f"no pixel has a usable depth: `focal` {focal:g} x `baseline` {baseline:g} / (disparity "
+                         f"{lo:g}..{hi:g} + `doffs` {doffs:g}) is 0, inf or undefined (d + doffs <= 0) at every "
+                         "pixel; check the calibration")
+    return z
 
 
 def point_cloud(depth, colors, focal: float, cx: float, cy: float) -> tuple[np.ndarray, np.ndarray]:
@@ -69,6 +82,7 @@ def point_cloud(depth, colors, focal: float, cx: float, cy: float) -> tuple[np.n
     -------
     xyz : (N, 3) float32
         ``X = (u - cx) Z / f``, ``Y = (v - cy) Z / f``, ``Z``; x right, y down, z forward (OpenCV camera frame).
+        Points whose coordinates overflow float32 are left out.
     rgb : (N, 3) uint8
         Red, green, blue of each point.
     """
@@ -82,7 +96,10 @@ def point_cloud(depth, colors, focal: float, cx: float, cy: float) -> tuple[np.n
         raise InputError(f"`focal` must be a finite number > 0, got {focal!r}")
     v, u = np.nonzero(np.isfinite(z))
     Z = z[v, u].astype(np.float64)
-    xyz = np.column_stack([(u - cx) * Z / focal, (v - cy) * Z / focal, Z]).astype(np.float32)
+    with np.errstate(over="ignore", invalid="ignore"):  # coordinates beyond float32: those points are left out
+        xyz = np.column_stack([(u - cx) * Z / focal, (v - cy) * Z / focal, Z]).astype(np.float32)
+    keep = np.isfinite(xyz).all(axis=1)
+    xyz, v, u = xyz[keep], v[keep], u[keep]
     rgb = np.repeat(c[v, u][:, None], 3, axis=1) if c.ndim == 2 else c[v, u][:, ::-1]
     return xyz, np.ascontiguousarray(rgb, dtype=np.uint8)
 

@@ -416,12 +416,21 @@ def rectify_calibrated(calib: Calibration, size, pts1=None, pts2=None, margin: f
     -------
     Rectification
         With ``maps`` (remap tables) and an exact ``depth`` geometry.
+
+    Raises
+    ------
+    InputError
+        The images are not the calibration's size, or ``cv2.stereoRectify`` gives no finite result for it (absurd
+        magnitudes such as a focal length of 1e300).
     """
     w, h = _check_size(size)
     calib.check_size((w, h))
     R1, R2, P1, P2, _, _, _ = cv2.stereoRectify(calib.K1, calib.D1, calib.K2, calib.D2, (w, h), calib.R,
                                                 calib.T.reshape(3, 1), flags=0, alpha=0)
     P1, P2 = np.asarray(P1, float), np.asarray(P2, float)
+    if not all(np.isfinite(m).all() for m in (R1, R2, P1, P2)) or P1[0, 0] <= 0:
+        raise InputError(f"{calib.source}: `K1`, `K2`, `R` and `T` give no finite rectification (cv2.stereoRectify); "
+                         "check their magnitudes", file=calib.source)
     shift, lo, hi, vert = 0.0, 0.0, float(calib.ndisp or 128) - 16.0, np.empty(0)
     if pts1 is not None and pts2 is not None and len(pts1) > 0:
         p1 = np.asarray(pts1, np.float64).reshape(-1, 1, 2)

@@ -8,7 +8,8 @@ returns an (H, W) float32 disparity of the LEFT image in pixels, NaN where it ha
 ``disparity_sgm`` follows Hirschmueller's semi-global matching (PAMI 2008): a census (optionally plus truncated
 absolute-difference) matching cost, cost aggregation along 8 (or 4) scanline directions with penalties P1 / P2 where
 P2 shrinks across intensity edges, winner-take-all with a uniqueness test, a parabola through the aggregated costs for
-sub-pixel disparity, a left-right consistency check on the same cost volume and removal of small speckles.
+sub-pixel disparity, a left-right consistency check on the same cost volume, rejection of the pixels whose census
+window is flat (nothing to match on) and removal of small speckles.
 All per-pixel work runs in the numba kernels of :mod:`._kernels` (``cache=True``; ``parallel=True`` where scanlines
 are independent), imported on the first call so that importing the package does not import numba.
 """
@@ -61,6 +62,28 @@ def _check_pair(left: np.ndarray, right: np.ndarray, max_disp: int) -> None:
 
 def _gray(img: np.ndarray) -> np.ndarray:
     return img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+
+
+def textureless(gray: np.ndarray, window: tuple[int, int]) -> np.ndarray:
+    """Pixels whose (height, width) ``window`` holds one grey level only (edges replicated, as the census pads).
+
+    Parameters
+    ----------
+    gray : (H, W) uint8
+        The image.
+    window : (int, int)
+        Odd (height, width) of the window centred on each pixel.
+
+    Returns
+    -------
+    (H, W) bool
+        True where the window is flat: its census signature is empty and its matching cost the same at every
+        disparity, so nothing there can be matched.
+    """
+    kernel = np.ones((int(window[0]), int(window[1])), np.uint8)
+    lo = cv2.erode(gray, kernel, borderType=cv2.BORDER_REPLICATE)
+    hi = cv2.dilate(gray, kernel, borderType=cv2.BORDER_REPLICATE)
+    return lo == hi
 
 
 # ----------------------------------------------------------------------------------------------- public API
@@ -119,8 +142,9 @@ def disparity_sgm(
     Returns
     -------
     ndarray, (H, W) float32
-        Disparity of the left image in pixels, NaN where rejected (occluded, ambiguous, inconsistent, speckle, or
-        ``x < d`` for every candidate).
+        Disparity of the left image in pixels, NaN where rejected (occluded, ambiguous, inconsistent, speckle,
+        textureless: the census window is flat in the left image (:func:`textureless`), or ``x < d`` for every
+        candidate).
 
     Raises
     ------
@@ -192,6 +216,9 @@ def disparity_sgm(
     disp, _ = _winner(cost, down, up, gl, np.int16(p1), p2_lut, float(uniqueness), bool(subpixel),
                       float(lr_max_diff))
     del cost, down, up
+    # the paths would carry a disparity into a flat window from wherever there is texture (all of a uniform pair
+    # would get one): without texture of its own a pixel has no estimate to trust
+    disp[textureless(gl, census_size)] = -1.0
     if speckle_size > 0:
         _remove_speckles(disp, int(speckle_size), float(speckle_range))
     if fill:
