@@ -5,8 +5,10 @@
 - ``""`` (the default): a plain loop in this process; Dask is not even imported.
 - ``"local"``: a ``distributed.LocalCluster`` of ``workers`` single-threaded worker processes (default: one per
   core), with numba and OpenCV limited to one thread each so that the workers do not fight over the cores.
-- ``"tcp://host:port"`` (any Dask address): a running cluster, e.g. ``dask scheduler`` and ``dask worker``, or any
-  other Dask deployment (Kubernetes, Slurm through dask-jobqueue).
+- ``"tcp://host:port"`` (port 1..65535): a running cluster, e.g. ``dask scheduler`` and ``dask worker``, or any
+  other Dask deployment (Kubernetes, Slurm through dask-jobqueue). Before a client connects, the address is checked
+  to greet like a Dask scheduler within ``timeout`` seconds (:func:`probe_scheduler`); a scheduler lost mid-run ends
+  the run with one :class:`ComputeError` naming it, after the items that had finished were yielded.
 
 Items travel with their data: ``fn(item, shared)`` receives arrays or bytes, never a path in the caller's working
 directory, because a worker need not see that directory. Each item's data is scattered straight to a worker, in
@@ -38,8 +40,15 @@ from .errors import EstimationError, InputError
 WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OPENCV_FOR_THREADS_NUM": "1", "OMP_NUM_THREADS": "1",
               "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
 
-#: seconds to wait for a remote scheduler before giving up
+#: seconds to wait for a remote scheduler (the connection, its greeting and the client's registration) before giving
+#: up; the default of every ``timeout`` parameter of this module
 CONNECT_TIMEOUT = 10.0
+#: the address schemes accepted: plain TCP only (``tls://`` would need certificates that no option passes, ``ucx://``
+#: an extra package)
+SCHEMES = ("tcp",)
+#: the most bytes a scheduler's first message (its greeting, about 60 bytes) may announce; a peer announcing more
+#: is not a Dask scheduler and is refused before anything is allocated for it
+MAX_GREETING_BYTES = 64 * 1024
 
 
 class ComputeError(EstimationError):
@@ -126,15 +135,113 @@ def item_error(result: ItemResult, file: str | None = None) -> EstimationError |
         return (InputError if issubclass(cls, InputError) else EstimationError)(result.error, file=file)
 
 
+def scheduler_problem(scheduler: str) -> str | None:
+    """Why ``scheduler`` (stripped) is not ``""``, ``"local"`` or ``tcp://host:port`` with a port in 1..65535, as the
+    end of a sentence; None when it is one of them. Parses only: nothing is contacted."""
+    from urllib.parse import urlsplit
+
+    s = scheduler.strip()
+    forms = "must be '' (in process), 'local' or a scheduler address tcp://host:port (port 1..65535)"
+    if s in ("", "local"):
+        return None
+    if "://" not in s:
+        return forms
+    scheme = s.split("://", 1)[0].lower()
+    if scheme not in SCHEMES:
+        return f"{forms}; scheme {scheme}:// is not supported (only {', '.join(f'{x}://' for x in SCHEMES)})"
+    try:
+        parts = urlsplit(s)
+        port = parts.port
+    except ValueError:  # a port that is not a number in 0..65535
+        return f"{forms}; the port is not a number in 1..65535"
+    if not parts.hostname:
+        return f"{forms}; the host is empty"
+    if port is None:
+        return f"{forms}; the port is missing"
+    if not 1 <= port <= 65535:
+        return f"{forms}; port {port} is outside 1..65535"
+    if parts.path not in ("", "/") or parts.query or parts.fragment or parts.username or parts.password:
+        return f"{forms}; nothing may follow host:port"
+    return None
+
+
 def check_scheduler(scheduler: str, name: str = "compute.scheduler") -> str:
-    """``scheduler`` stripped if it is ``""``, ``"local"`` or a ``scheme://address``; else raise naming ``name``."""
+    """``scheduler`` stripped if it is ``""``, ``"local"`` or ``tcp://host:port``; else raise naming ``name``.
+
+    Raises
+    ------
+    InputError
+        Not a string, another scheme (``tls://``, ``ucx://``), an empty host, or a port outside 1..65535.
+    """
     if not isinstance(scheduler, str):
         raise InputError(f"`{name}` must be a string, got {scheduler!r}")
-    s = scheduler.strip()
-    if s in ("", "local") or ("://" in s and s.split("://", 1)[1]):
-        return s
-    raise InputError(f"`{name}` must be '' (in process), 'local' or a scheduler address like tcp://host:8786, "
-                     f"got {scheduler!r}")
+    problem = scheduler_problem(scheduler)
+    if problem is not None:
+        raise InputError(f"`{name}` {problem}, got {scheduler!r}")
+    return scheduler.strip()
+
+
+def check_timeout(timeout: float, name: str = "timeout") -> float:
+    """``timeout`` as a float if it is a finite number of seconds > 0; else raise naming ``name``."""
+    import math
+
+    if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not (math.isfinite(timeout)
+                                                                                 and timeout > 0):
+        raise InputError(f"`{name}` must be a finite number of seconds > 0, got {timeout!r}")
+    return float(timeout)
+
+
+def probe_scheduler(address: str, timeout: float = CONNECT_TIMEOUT) -> None:
+    """Check that a Dask scheduler answers at ``address`` within ``timeout`` seconds, before a client connects.
+
+    A Dask scheduler greets every new connection at once with a short message: an 8-byte little-endian length
+    and that many bytes (:data:`MAX_GREETING_BYTES` at most). A peer that accepts and says nothing (a plain HTTP
+    server waits for a request), closes, answers in HTTP or announces a larger first message is not one; the Dask
+    client would wait on it for ever or allocate what it announces, so it is refused here. Only the first 8 bytes
+    are read; the connection is then closed.
+
+    Parameters
+    ----------
+    address : str
+        ``tcp://host:port`` (see :func:`check_scheduler`).
+    timeout : float
+        Seconds for the connection and the greeting together.
+
+    Raises
+    ------
+    ComputeError
+        Nothing listens, the peer does not greet within ``timeout``, or its greeting is not a Dask one; the
+        message names the address.
+    """
+    import socket
+    import struct
+    import time
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(address)
+    deadline = time.monotonic() + timeout
+    why = f"cannot reach the Dask scheduler at {address} within {timeout:g} s"
+    try:
+        with socket.create_connection((parts.hostname, parts.port), timeout=timeout) as sock:
+            head = b""
+            while len(head) < 8:
+                sock.settimeout(max(deadline - time.monotonic(), 1e-3))
+                chunk = sock.recv(8 - len(head))
+                if not chunk:
+                    raise ComputeError(f"{address} closed the connection without a Dask greeting: not a Dask "
+                                       "scheduler")
+                head += chunk
+    except socket.timeout:
+        raise ComputeError(f"{address} accepted the connection but sent no Dask greeting within {timeout:g} s: "
+                           "not a Dask scheduler (or it is overloaded)") from None
+    except OSError as exc:
+        raise ComputeError(f"{why}: {exc.strerror or exc}") from None
+    if head[:5] in (b"HTTP/", b"<!DOC", b"<html"):
+        raise ComputeError(f"{address} answers HTTP, not the Dask protocol: not a Dask scheduler (its dashboard?)")
+    (size,) = struct.unpack("<Q", head)
+    if not 0 < size <= MAX_GREETING_BYTES:
+        raise ComputeError(f"{address} announced a first message of {size} bytes (a Dask scheduler's greeting is "
+                           f"at most {MAX_GREETING_BYTES}): not a Dask scheduler")
 
 
 def _run_one(fn: Callable, item: Any, shared: Any, with_shared: bool, keep: bool = False) -> tuple:
@@ -185,18 +292,22 @@ def cluster(scheduler: str, workers: int | None = None, *, timeout: float = CONN
     workers : int, optional
         Worker processes of a ``local`` cluster; None or 0 = ``os.cpu_count()``. Ignored otherwise.
     timeout : float
-        Seconds to wait for a remote scheduler.
+        Seconds to wait for a remote scheduler: its greeting (:func:`probe_scheduler`), then the client's
+        connection and registration (default :data:`CONNECT_TIMEOUT`).
     name : str
         The parameter or option that named ``scheduler``, for error messages.
 
     Raises
     ------
     InputError
-        ``scheduler`` is not one of the accepted forms, or ``workers`` is negative.
+        ``scheduler`` is not one of the accepted forms, ``timeout`` is not a positive number or ``workers`` is
+        negative.
     ComputeError
-        The scheduler at the address could not be reached within ``timeout``.
+        The scheduler at the address could not be reached, or did not answer as a Dask scheduler, within
+        ``timeout``.
     """
     s = check_scheduler(scheduler, name)
+    timeout = check_timeout(timeout)
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 0):
         raise InputError(f"`compute.workers` must be an integer >= 0 (0 = one per core), got {workers!r}")
     if s == "":
@@ -219,15 +330,51 @@ def cluster(scheduler: str, workers: int | None = None, *, timeout: float = CONN
         finally:
             local.close()
         return
+    probe_scheduler(s, timeout)
+    quiet = _quiet_client_logs()
     try:
-        client = Client(s, timeout=timeout)
+        with dask.config.set({"distributed.comm.timeouts.connect": f"{timeout}s"}):
+            client = Client(s, timeout=timeout)
     except (OSError, TimeoutError, ValueError) as exc:
+        quiet.close()
         raise ComputeError(f"cannot reach the Dask scheduler at {s} within {timeout:g} s: "
                            f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
     try:
         yield client
     finally:
-        client.close()
+        with contextlib.suppress(*_lost_scheduler()):
+            client.close(timeout=timeout)
+        quiet.close()
+
+
+def _lost_scheduler() -> tuple[type[BaseException], ...]:
+    """What a client call raises when its scheduler went away: an ``OSError`` (a closed or reset connection, a
+    timed-out reconnect; Dask's ``CommClosedError`` is one), a ``TimeoutError``, the futures cancelled with it."""
+    from concurrent.futures import CancelledError
+
+    return OSError, TimeoutError, CancelledError
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+class _quiet_client_logs:
+    """Silence the ``distributed`` loggers (their reconnect attempts and tracebacks) until :meth:`close`: on a remote
+    scheduler, what went wrong is the one :class:`ComputeError` line."""
+
+    #: the family's root and the loggers that Dask's logging configuration gives a level of their own
+    LOGGERS = ("distributed", "distributed.client", "distributed.comm", "distributed.core", "distributed.batched")
+
+    def __init__(self):
+        self._levels = {name: logging.getLogger(name).level for name in self.LOGGERS}
+        for name in self.LOGGERS:
+            logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+
+    def close(self) -> None:
+        for name, level in self._levels.items():
+            logging.getLogger(name).setLevel(level)
 
 
 def map_items(fn: Callable, items: Iterable, *, scheduler: str = "", workers: int | None = None,
@@ -261,7 +408,7 @@ def map_items(fn: Callable, items: Iterable, *, scheduler: str = "", workers: in
     client : distributed.Client, optional
         An open client to use instead of ``scheduler`` (kept open).
     timeout : float
-        Seconds to wait for a remote scheduler.
+        Seconds to wait for a remote scheduler (see :func:`cluster`; default :data:`CONNECT_TIMEOUT`).
 
     Yields
     ------
@@ -271,9 +418,11 @@ def map_items(fn: Callable, items: Iterable, *, scheduler: str = "", workers: in
     Raises
     ------
     InputError
-        Bad ``scheduler``, ``workers``, ``window`` or ``retries``.
+        Bad ``scheduler``, ``workers``, ``window``, ``retries`` or ``timeout``.
     ComputeError
-        The scheduler cannot be reached (raised at the first ``next()``, before any item runs).
+        The scheduler cannot be reached or is not a Dask scheduler (raised at the first ``next()``, before any item
+        runs), or it was lost mid-run (raised after the items that had finished were yielded; the message names
+        the address and their number).
     """
     if window is not None and (isinstance(window, bool) or not isinstance(window, int) or window < 1):
         raise InputError(f"`compute.window` must be a positive integer, got {window!r}")
@@ -299,8 +448,17 @@ def _serial_gen(fn, items, shared, with_shared, progress, total):
 def _cluster_gen(fn, items, scheduler, workers, shared, with_shared, window, retries, progress, total, client,
                  timeout):
     ctx = contextlib.nullcontext(client) if client is not None else cluster(scheduler, workers, timeout=timeout)
+    finished = 0
     with ctx as c:
-        yield from _windowed(c, fn, items, shared, with_shared, window, retries, progress, total)
+        try:
+            for res in _windowed(c, fn, items, shared, with_shared, window, retries, progress, total):
+                yield res
+                finished += 1
+        except (ComputeError, *_lost_scheduler()) as exc:
+            # the items already yielded are the caller's to keep; the rest never ran
+            where = scheduler if client is None else getattr(getattr(c, "scheduler", None), "address", "?")
+            raise ComputeError(f"lost the Dask scheduler at {where} after {finished} items had finished "
+                               f"({_first_line(exc)})") from None
 
 
 def _windowed(client, fn, items, shared, with_shared, window, retries, progress, total) -> Iterator[ItemResult]:
@@ -407,7 +565,7 @@ def _wait_some(client, futures: list) -> list:
         if finished:
             return finished
         if client.status not in ("running", "connecting"):
-            raise ComputeError(f"lost the Dask scheduler while waiting for results (client {client.status})")
+            raise ComputeError(f"the client is {client.status} while waiting for results")
 
 
 def _task_failure(fut) -> BaseException:

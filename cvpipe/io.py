@@ -361,13 +361,12 @@ def safe_name(name: Any, what: str = "name") -> str:
     return name
 
 
-@contextlib.contextmanager
-def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; on success rename it to ``path``, on any failure delete it.
+def _temporary_beside(path: str | os.PathLike) -> Path:
+    """Create and return an empty temporary file beside ``path`` (its folder created if needed).
 
     The temporary is ``.<name>.cvpipe-tmp-<pid>-<random><suffix>``, created with mode ``0o666`` less the umask (so
-    the output honours the umask, unlike :func:`tempfile.mkstemp`'s 0600). It is removed on every exception,
-    KeyboardInterrupt included; one left by a killed process is removed by the next write into the same folder.
+    the output honours the umask, unlike :func:`tempfile.mkstemp`'s 0600); the first write into a folder removes
+    the temporaries that killed processes left there.
     """
     dest = Path(path)
     if dest.is_dir():
@@ -381,21 +380,119 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     if parent not in _SWEPT:
         remove_stale_temporaries(parent)
         _SWEPT.add(parent)
+    while True:
+        candidate = dest.parent / f".{dest.stem}{TMP_MARKER}{os.getpid()}-{secrets.token_hex(4)}{dest.suffix}"
+        try:
+            os.close(os.open(candidate, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+        except FileExistsError:
+            continue
+        return candidate
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; on success rename it to ``path``, on any failure delete it.
+
+    The temporary (see :func:`_temporary_beside`) is removed on every exception, KeyboardInterrupt included; one
+    left by a killed process is removed by the next write into the same folder.
+    """
     tmp_path = None
     try:
-        while tmp_path is None:
-            candidate = dest.parent / f".{dest.stem}{TMP_MARKER}{os.getpid()}-{secrets.token_hex(4)}{dest.suffix}"
-            try:
-                os.close(os.open(candidate, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
-            except FileExistsError:
-                continue
-            tmp_path = candidate
+        tmp_path = _temporary_beside(path)
         yield tmp_path
-        os.replace(tmp_path, dest)
+        os.replace(tmp_path, path)
     finally:
         if tmp_path is not None:
             with contextlib.suppress(OSError):
                 tmp_path.unlink(missing_ok=True)
+
+
+class OutputSet:
+    """The outputs of one command, written all or none: see :func:`all_or_none`."""
+
+    def __init__(self):
+        self._pending: list[tuple[Path, Path]] = []  # (temporary, destination)
+
+    def path(self, dest: str | os.PathLike) -> Path:
+        """A temporary path beside ``dest`` with its suffix, to write ``dest``'s content to (with any writer of
+        this module); it becomes ``dest`` when the whole set succeeds."""
+        tmp = _temporary_beside(dest)
+        self._pending.append((tmp, Path(dest)))
+        return tmp
+
+    def _commit(self) -> None:
+        for tmp, dest in self._pending:
+            os.replace(tmp, dest)
+        self._pending.clear()
+
+    def _discard(self) -> None:
+        for tmp, _ in self._pending:
+            with contextlib.suppress(OSError):
+                tmp.unlink(missing_ok=True)
+        self._pending.clear()
+
+
+@contextlib.contextmanager
+def all_or_none() -> Iterator[OutputSet]:
+    """Write several output files all or none: each is written to a temporary beside it (``outs.path(dest)``), and
+    only when the block succeeds are they renamed, one after the other, to their names; on any failure (an
+    exception, Ctrl-C) every temporary is deleted and the files already there are left untouched. One killed
+    process leaves only temporaries, which the next write into the folder removes.
+
+    Examples
+    --------
+    >>> with all_or_none() as outs:                                  # doctest: +SKIP
+    ...     save_image(outs.path("disparity.png"), picture)
+    ...     save_npy(outs.path("depth.npy"), z)
+    """
+    outs = OutputSet()
+    try:
+        yield outs
+        outs._commit()
+    finally:
+        outs._discard()
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    if os.path.normcase(os.path.realpath(a)) == os.path.normcase(os.path.realpath(b)):
+        return True
+    try:
+        return a.exists() and b.exists() and os.path.samefile(a, b)  # hard links, case-insensitive file systems
+    except OSError:
+        return False
+
+
+def check_distinct_outputs(outputs: Iterable[tuple[str, str | os.PathLike | None]],
+                           inputs: Iterable[tuple[str, str | os.PathLike | None]] = ()) -> None:
+    """Refuse, before any work, outputs that name the same file or an input.
+
+    Parameters
+    ----------
+    outputs : iterable of (name, path or None)
+        Each output file and how messages name it (``"`-o`"``, ``"`--depth`"``); None entries are skipped.
+    inputs : iterable of (name, path or None)
+        The files the command reads (``"LEFT"``, ``"`--calib`"``).
+
+    Raises
+    ------
+    InputError
+        Two outputs resolve to one file (symbolic and hard links included), or an output is an input.
+    """
+    seen: list[tuple[str, Path]] = []
+    ins = [(name, Path(p)) for name, p in inputs if p is not None]
+    for name, p in outputs:
+        if p is None:
+            continue
+        path = Path(p)
+        for other, q in seen:
+            if _same_file(path, q):
+                raise InputError(f"{other} and {name} name the same file {path}; give each output its own name",
+                                 file=str(path))
+        for other, q in ins:
+            if _same_file(path, q):
+                raise InputError(f"{name} {path} is the input {other}; writing it would replace the input, give "
+                                 "the output another name", file=str(path))
+        seen.append((name, path))
 
 
 def save_image(path: str | os.PathLike, img: np.ndarray, jpeg_quality: int = 95) -> None:

@@ -11,12 +11,13 @@ A stage script is one function of its own logic plus one call::
         run(hough_edges, section="hough.edges", args={"images": "input folder", "out": "output folder"})
 
 The runner builds the command line from the declared paths (every path is a required ``--name`` option; the values
-live in ``dvc.yaml``'s ``cmd``), loads and validates the stage's ``params.yaml`` section(s), shows progress on
-stderr when it is a terminal, turns a bad input or parameter into one line ``<stage>: error: ...`` naming the file
-or key (exit 2; 1 when the algorithm could not produce a result; 130 on Ctrl-C) with no traceback, prints one
-summary line (what the stage made, what it dropped and why) and writes the stage's timings to
-``outputs/timings/<stage>.json``. Timings are never part of a cached output: a rerun that gives the same results
-leaves every DVC hash unchanged, so the stages after it stay up to date.
+live in ``dvc.yaml``'s ``cmd``, except a user's data folder, which ``cmd`` names by its parameter, ``--images-param
+hough.data``, so that no value of ``params.yaml`` ever reaches the shell), loads and validates the stage's
+``params.yaml`` section(s), shows progress on stderr when it is a terminal, turns a bad input or parameter into one
+line ``<stage>: error: ...`` naming the file or key (exit 2; 1 when the algorithm could not produce a result; 130 on
+Ctrl-C) with no traceback, prints one summary line (what the stage made, what it dropped and why) and writes the
+stage's timings to ``outputs/timings/<stage>.json``. Timings are never part of a cached output: a rerun that gives
+the same results leaves every DVC hash unchanged, so the stages after it stay up to date.
 """
 
 from __future__ import annotations
@@ -42,6 +43,9 @@ REPORT_ARGS = {"summary": "summary JSON for the report page", "plots": "folder f
 
 #: where the uncached timing files go (relative to the repository root, where DVC runs every stage)
 TIMINGS_DIR = Path("outputs/timings")
+#: ``--<name>-param KEY``: the alternative of every single-path argument ``--<name>``, its value read from the params
+#: file (:func:`path_param`)
+PARAM_SUFFIX = "-param"
 #: overrides ``compute.scheduler`` of the params file for the stages that fan out (:meth:`Stage.map`)
 SCHEDULER_ENV = "CVPIPE_COMPUTE_SCHEDULER"
 
@@ -192,6 +196,39 @@ class Stage:
         return line
 
 
+def path_param(path: str | os.PathLike, key: str) -> str:
+    """The value of the dotted parameter ``key`` (``"hough.data"``) of the params file ``path``: a path.
+
+    A stage is told the parameter's name rather than its value so that no value of ``params.yaml`` (a folder named
+    by a user: spaces, quotes, ``;``, ``$``) is ever pasted into the shell command that DVC runs.
+
+    Raises
+    ------
+    InputError
+        The parameter is missing, or is not a non-empty string without NUL.
+    """
+    from cvpipe.params import read_params_file
+
+    node: Any = read_params_file(path)
+    for part in key.split("."):
+        if not isinstance(node, dict) or part not in node:
+            raise InputError(f"{path}: parameter `{key}` is missing")
+        node = node[part]
+    if not isinstance(node, str) or not node.strip() or "\0" in node:
+        raise InputError(f"`{key}` must be a folder path (a non-empty string), got {node!r} "
+                         f"({type(node).__name__}) in {path}", file=str(path))
+    return node
+
+
+def _resolve_path_params(ns: argparse.Namespace, args: dict[str, str]) -> None:
+    """Replace each ``--<name>-param KEY`` given by ``--<name> <value of KEY>`` (see :func:`path_param`)."""
+    for name in args:
+        dest = name.replace("-", "_")
+        key = getattr(ns, f"{dest}{PARAM_SUFFIX.replace('-', '_')}", None)
+        if key is not None:
+            setattr(ns, dest, path_param(ns.params, key))
+
+
 def _has_compute(path: str) -> bool:
     """Whether the params file has a ``compute`` section (without one, items run in process)."""
     from cvpipe.params import read_params_file
@@ -203,8 +240,13 @@ def _has_compute(path: str) -> bool:
 def _parser(doc: str, args: dict[str, str], options: dict[str, dict]) -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     for name, help_text in args.items():
-        nargs = "+" if help_text.startswith("+") else None
-        ap.add_argument(f"--{name}", required=True, nargs=nargs, help=help_text.lstrip("+"))
+        if help_text.startswith("+"):
+            ap.add_argument(f"--{name}", required=True, nargs="+", help=help_text.lstrip("+"))
+            continue
+        group = ap.add_mutually_exclusive_group(required=True)
+        group.add_argument(f"--{name}", help=help_text)
+        group.add_argument(f"--{name}{PARAM_SUFFIX}", metavar="KEY",
+                           help=f"the parameter of the params file whose value is --{name} (e.g. hough.data)")
     for name, spec in options.items():
         ap.add_argument(f"--{name}", **spec)
     ap.add_argument("--params", default="params.yaml", help="the parameter file (default: params.yaml)")
@@ -224,8 +266,10 @@ def run(fn: Callable[[Stage], Any], *, section: str | Sequence[str] | None = Non
         The ``params.yaml`` section(s) the stage reads (``"hough.edges"``). The first one's model is ``st.params``;
         all of them are in ``st.sections`` by name.
     args : dict
-        Path arguments, name -> help text; each becomes a required ``--name``. A help text starting with ``+``
-        makes the argument take one or more values.
+        Path arguments, name -> help text; each becomes a required ``--name``, or its alternative
+        ``--name-param KEY`` which reads the path from the parameter ``KEY`` of the params file (how ``dvc.yaml``
+        passes ``<task>.data``). A help text starting with ``+`` makes the argument take one or more values (and
+        has no ``-param`` form).
     options : dict, optional
         Further arguments, name -> ``argparse.add_argument`` keywords (``{"method": {"required": True}}``).
     name : str, optional
@@ -242,6 +286,7 @@ def run(fn: Callable[[Stage], Any], *, section: str | Sequence[str] | None = Non
     status = 0
     t0 = time.perf_counter()
     try:
+        _resolve_path_params(ns, args)
         names = [section] if isinstance(section, str) else list(section or [])
         for sec in names:
             st.sections[sec] = load_section(SECTIONS[sec], sec, ns.params)

@@ -16,7 +16,11 @@ from stages._runner import Stage, run
 
 def stereo_depth(st: Stage) -> None:
     a = st.args
-    rectified, disparities, out = Path(a.rectified), Path(a.disparities), Path(a.out)
+    if (a.disparities is None) == (a.disparities_root is None):
+        raise InputError("give one of --disparities FOLDER or --disparities-root FOLDER")
+    # the method is read from the validated section, never from the command line, so it is one of its choices
+    disparities = Path(a.disparities) if a.disparities is not None else Path(a.disparities_root) / st.params.method
+    rectified, out = Path(a.rectified), Path(a.out)
     rects = io.load_json(rectified / "run.json")["pairs"]
     disp_run = io.load_json(disparities / "run.json")
     results, units, only = {}, {}, []
@@ -51,5 +55,8 @@ def stereo_depth(st: Stage) -> None:
 
 if __name__ == "__main__":
     run(stereo_depth, section="stereo.depth",
-        args={"rectified": "stereo_rectify's output folder", "disparities": "the stereo.depth.method disparities",
-              "out": "folder for <pair>/depth.npy|png, cloud.ply and run.json", "metrics": "metrics JSON"})
+        args={"rectified": "stereo_rectify's output folder",
+              "out": "folder for <pair>/depth.npy|png, cloud.ply and run.json", "metrics": "metrics JSON"},
+        options={"disparities": {"help": "a stereo_disparity output folder"},
+                 "disparities-root": {"help": "the folder of the stereo_disparity output folders, one per method: "
+                                              "the stage reads <folder>/<stereo.depth.method>"}})

@@ -216,6 +216,114 @@ def test_unreachable_scheduler_is_one_line_exit_1_nothing_written(probes, tmp_pa
     assert not out.exists() or not any(out.iterdir())
 
 
+@pytest.mark.parametrize("address, match", [
+    ("tcp://127.0.0.1:0", r"port 0 is outside 1\.\.65535, got 'tcp://127\.0\.0\.1:0'"),
+    ("tcp://127.0.0.1:99999", r"the port is not a number in 1\.\.65535"),
+    ("tcp://127.0.0.1:-5", r"the port is not a number in 1\.\.65535"),
+    ("tcp://127.0.0.1", r"the port is missing"),
+    ("tcp://:8786", r"the host is empty"),
+    ("tls://127.0.0.1:8786", r"scheme tls:// is not supported \(only tcp://\)"),
+    ("ucx://127.0.0.1:8786", r"scheme ucx:// is not supported"),
+    ("tcp://127.0.0.1:8786/x", r"nothing may follow host:port"),
+])
+def test_bad_addresses_are_refused_before_any_connection(address, match):
+    with pytest.raises(InputError, match=r"`--scheduler` must be '' \(in process\), 'local' or a scheduler address "
+                                         r"tcp://host:port \(port 1\.\.65535\); " + match):
+        check_scheduler(address, "--scheduler")
+    with pytest.raises(InputError, match=r"`compute.scheduler`: must be .*; " + match):
+        from_mapping(ComputeParams, {"scheduler": address}, "compute")
+
+
+def test_a_bad_address_is_exit_2_one_line(tmp_path, capsys):
+    img = tmp_path / "a.png"
+    cv2.imwrite(str(img), np.full((40, 40), 90, np.uint8))
+    code, out, err = _cli(["hough", str(img), "--scheduler", "tls://127.0.0.1:8786", "--json"], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "scheme tls:// is not supported" in err
+    assert json.loads(out)["exit"] == 2
+
+
+@pytest.mark.parametrize("timeout", [0, -1.0, float("nan"), float("inf"), "5"])
+def test_timeout_must_be_positive_seconds(timeout):
+    with pytest.raises(InputError, match=r"`timeout` must be a finite number of seconds > 0"):
+        list(map_items(abs, [1], scheduler="tcp://127.0.0.1:8786", timeout=timeout))
+
+
+@pytest.fixture
+def fake_server():
+    """``start(greet)`` listens on 127.0.0.1 in a thread and returns its ``tcp://`` address; ``greet`` is what it
+    sends each connection it accepts (None: nothing, ``"http"``: a plain ``http.server``). Stopped at the end."""
+    import socket
+    import threading
+    from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
+
+    stops = []
+
+    def start(greet):
+        if greet == "http":
+            server = ThreadingHTTPServer(("127.0.0.1", 0), SimpleHTTPRequestHandler)
+            threading.Thread(target=server.serve_forever, daemon=True).start()
+            stops.append(server.shutdown)
+            stops.append(server.server_close)
+            return f"tcp://127.0.0.1:{server.server_address[1]}"
+        sock = socket.socket()
+        sock.bind(("127.0.0.1", 0))
+        sock.listen(8)
+        held = []
+
+        def serve():
+            while True:
+                try:
+                    conn, _ = sock.accept()
+                except OSError:
+                    return
+                held.append(conn)  # kept open, so the client sees silence rather than a closed connection
+                if greet:
+                    conn.sendall(greet)
+
+        threading.Thread(target=serve, daemon=True).start()
+        stops.append(lambda: [c.close() for c in held + [sock]])
+        return f"tcp://127.0.0.1:{sock.getsockname()[1]}"
+
+    yield start
+    for stop in stops:
+        stop()
+
+
+@pytest.mark.parametrize("greet, match", [
+    (None, "accepted the connection but sent no Dask greeting within 1 s: not a Dask scheduler"),
+    ("http", "accepted the connection but sent no Dask greeting within 1 s: not a Dask scheduler"),
+    (b"HTTP/1.0 400 Bad request\r\n", "answers HTTP, not the Dask protocol"),
+    (int(6e9).to_bytes(8, "little") + bytes(64), "announced a first message of 6000000000 bytes"),
+])
+def test_a_peer_that_does_not_speak_dask_fails_within_the_timeout(fake_server, greet, match):
+    address = fake_server(greet)
+    t0 = time.monotonic()
+    with pytest.raises(ComputeError, match=f"{address} {match}"):
+        list(map_items(abs, [1, 2], scheduler=address, timeout=1))
+    # no hang: the timeout bounds the wait (the margin covers importing Dask on a loaded machine)
+    assert time.monotonic() - t0 < 1 + 20
+
+
+@pytest.mark.slow
+def test_a_scheduler_killed_mid_run_is_one_error_naming_it_after_the_finished_items():
+    from cvpipe.bench.scale import external_cluster, worker_environment
+
+    env = worker_environment()
+    env["PYTHONPATH"] = os.pathsep.join([os.path.dirname(__file__), env["PYTHONPATH"]])
+    with external_cluster(1, env=env) as ext:
+        got = []
+        with pytest.raises(ComputeError, match=rf"lost the Dask scheduler at {ext.address} after \d+ items had "
+                                               r"finished \(.+\)$") as err:
+            for r in map_items(slow_square, range(40), scheduler=ext.address, window=4):
+                got.append(r)
+                if r.index == 3:
+                    ext.scheduler.send_signal(signal.SIGKILL)
+                    ext.scheduler.wait(timeout=10)
+    assert [r.index for r in got] == list(range(len(got))) and len(got) >= 4  # the finished items were yielded
+    assert f"after {len(got)} items had finished" in str(err.value)
+    assert "\n" not in str(err.value)
+
+
 def test_unreachable_scheduler_raises_compute_error():
     from cvpipe.bench.scale import free_port
 

@@ -43,6 +43,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"`--max-features` must be >= 1, got {args.max_features}")
     if not 0.0 < args.ratio <= 1.0:
         raise InputError(f"`--ratio` must be in (0, 1], got {args.ratio}")
+    io.check_distinct_outputs([("`--overlay`", args.overlay)], [("A", args.a), ("B", args.b)])
     from .. import homography
 
     with step("read"):

@@ -104,6 +104,8 @@ def run(args: argparse.Namespace) -> int:
                                                          "threshold": args.threshold, "refine": args.refine})
     shared = (edges_params, lines_params, method)
     pictures = overlay_paths(args.image, args.overlay, SUFFIX)
+    io.check_distinct_outputs([("`--overlay`", p) for p in pictures],
+                              [(f"IMAGE {k + 1}", path) for k, path in enumerate(args.image)])
     with step(f"lines ({method})"):
         images = read_images(args.image, "gray", first_read=announce)
         results = list(progress(map_items(image_lines, images, shared=shared, scheduler=scheduler,

@@ -119,6 +119,14 @@ def run(args: argparse.Namespace) -> int:
     params = params_from_args(args)
     if args.out:
         io.check_output_folder(args.out, "`--out`")
+    stems = overlay_stems(args.probes)
+    pictures = overlay_paths(args.probes, args.overlay, "_regions")
+    folder = [] if not args.out else [("`--out`", Path(args.out) / name) for name in
+                                      [f"{st}{kind}.png" for st in stems for kind in ("_regions", "_diff")]
+                                      + ["inspect.json"]]
+    io.check_distinct_outputs(folder + [("`--overlay`", p) for p in pictures],
+                              [("REFERENCE", args.reference)] + [(f"PROBE {k + 1}", path)
+                                                                 for k, path in enumerate(args.probes)])
     reference = io.read_image(args.reference, "color")
     ref_gray = io.to_gray(reference)
     if int(ref_gray.max()) == int(ref_gray.min()):
@@ -129,8 +137,6 @@ def run(args: argparse.Namespace) -> int:
         compile_note("inspect", homography)
 
     ref_feats = detect_with(ref_gray, params.features)
-    stems = overlay_stems(args.probes)
-    pictures = overlay_paths(args.probes, args.overlay, "_regions")
     results, errors = [], []
     # checked before any probe runs: a bad address is one line and nothing is written
     scheduler = check_scheduler(args.scheduler, "--scheduler")

@@ -173,12 +173,14 @@ def run(args: argparse.Namespace) -> int:
     from .. import homography
 
     scheduler = check_scheduler(args.scheduler, "--scheduler")
+    pictures = overlay_paths(args.scenes, args.overlay, SUFFIX)
+    io.check_distinct_outputs([("`--overlay`", p) for p in pictures],
+                              [(f"SCENE {k + 1}", path) for k, path in enumerate(args.scenes)])
     with step(f"gallery ({args.method})"):
         g = SharedGallery(gallery_references(args.gallery, args.method, args.max_features), mp)
         g.gallery  # noqa: B018 - index here too, so that a gallery error is one line before any scene runs
     records, failed = [], 0
     shared = (g, args.method, args.max_features, args.min_long_side, mp, vp, args.seed)
-    pictures = overlay_paths(args.scenes, args.overlay, SUFFIX)
     # the note once a scene was read: gallery and scene errors come first, without it
     scenes = read_images(args.scenes, "gray", named=True, first_read=lambda: compile_note("logo", homography))
     items = map_items(recognize_scene, scenes, shared=shared, scheduler=scheduler,

@@ -5,6 +5,7 @@ calibration its depth and coloured point cloud."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from typing import TYPE_CHECKING
 
@@ -88,6 +89,9 @@ def run(args: argparse.Namespace) -> int:
                               ("`--ply`", args.ply, (".ply",)), ("`--overlay`", args.overlay, (".png",))):
         if path is not None:
             io.check_output_path(path, flag, kinds)
+    io.check_distinct_outputs([("`-o`", args.out), ("`--depth`", args.depth), ("`--ply`", args.ply),
+                               ("`--overlay`", args.overlay)],
+                              [("LEFT", args.left), ("RIGHT", args.right), ("`--calib`", args.calib)])
     left, right = _read(args.left), _read(args.right)
     calib = _read_calib(args.calib) if args.calib else None
     if calib is None and (args.depth or args.ply):
@@ -107,22 +111,25 @@ def run(args: argparse.Namespace) -> int:
             z = depth_mod.depth_from_disparity(disp, geometry.focal, geometry.baseline, geometry.doffs)
         except InputError as exc:
             raise InputError(f"{args.calib}: {exc}", file=args.calib) from None
-    _save_map(args.out, disp.astype(np.float32), 0.0, float(max_disp), "px", "disparity")
-    out = {"valid_fraction": float(np.isfinite(disp).mean()), "max_disp": int(max_disp), "out": args.out, **info}
-    if args.overlay:
-        _save_map(args.overlay, disp.astype(np.float32), 0.0, float(max_disp), "px", "disparity")
-        out["overlay"] = args.overlay
-    if z is not None:
-        out.update({"depth_unit": geometry.unit, "focal_px": geometry.focal, "baseline": geometry.baseline,
-                    "doffs_px": geometry.doffs, "depth_exact": geometry.exact})
-        if args.depth:
-            _save_map(args.depth, z, None, None, geometry.unit, "depth")
-        if args.ply:
-            xyz, rgb = depth_mod.point_cloud(z, left, geometry.focal, geometry.cx, geometry.cy)
-            data = depth_mod.ply_bytes(xyz, rgb, comment=f"units {geometry.unit}; camera frame x right y down z fwd")
-            with io.atomic_path(args.ply) as tmp:
-                tmp.write_bytes(data)
-            out["points"] = int(len(xyz))
+    # every file or none: a failure of a later one (a full disk) leaves all the older files untouched
+    with io.all_or_none() as outs:
+        _save_map(outs.path(args.out), disp.astype(np.float32), 0.0, float(max_disp), "px", "disparity")
+        out = {"valid_fraction": float(np.isfinite(disp).mean()), "max_disp": int(max_disp), "out": args.out,
+               **info}
+        if args.overlay:
+            _save_map(outs.path(args.overlay), disp.astype(np.float32), 0.0, float(max_disp), "px", "disparity")
+            out["overlay"] = args.overlay
+        if z is not None:
+            out.update({"depth_unit": geometry.unit, "focal_px": geometry.focal, "baseline": geometry.baseline,
+                        "doffs_px": geometry.doffs, "depth_exact": geometry.exact})
+            if args.depth:
+                _save_map(outs.path(args.depth), z, None, None, geometry.unit, "depth")
+            if args.ply:
+                xyz, rgb = depth_mod.point_cloud(z, left, geometry.focal, geometry.cx, geometry.cy)
+                data = depth_mod.ply_bytes(xyz, rgb,
+                                           comment=f"units {geometry.unit}; camera frame x right y down z fwd")
+                outs.path(args.ply).write_bytes(data)
+                out["points"] = int(len(xyz))
     if "note" in out:  # after the work, so that a failure stays a single line on stderr
         note(f"note: {out['note']}")
     if args.json:
@@ -196,14 +203,14 @@ def _prepare(args, left, right, calib):
     return info, rect.depth, left, right, rect.max_disp
 
 
-def _save_map(path: str, values: np.ndarray, lo, hi, unit: str, label: str) -> None:
+def _save_map(path: str | os.PathLike, values: np.ndarray, lo, hi, unit: str, label: str) -> None:
     """.npy: the float32 array; .png: the colour-mapped picture with its colour bar."""
     import numpy as np
 
     from .. import io
     from ..stereo import depth as depth_mod
 
-    if path.lower().endswith(".png"):
+    if str(path).lower().endswith(".png"):
         io.save_image(path, depth_mod.colorize(values, lo, hi, unit=unit, label=label))
         return
     with io.atomic_path(path) as tmp:

@@ -77,6 +77,8 @@ def run(args: argparse.Namespace) -> int:
 
     # before any work: a panorama that cannot be written must not cost the stitching first
     io.check_output_path(args.out, "`-o`", io.IMAGE_WRITE_SUFFIXES)
+    io.check_distinct_outputs([("`-o`", args.out), ("`--overlay`", args.overlay)],
+                              [(f"IMAGE {k + 1}", path) for k, path in enumerate(args.images)])
     images, positions, dropped = [], [], []
     for k, path in enumerate(progress(args.images, "read")):
         try:
@@ -113,7 +115,6 @@ def run(args: argparse.Namespace) -> int:
         raise EstimationError(with_flags(str(exc), _HINTED)) from exc
     for name, seconds in pano.timings.items():  # the library's own step timings, shown with -v
         log.info("  %s: %.3f s", name, seconds)
-    io.save_image(args.out, pano.image)
     reg = pano.registration
     for k, why in reg.dropped:
         dropped.append({"image": positions[k], "reason": with_flags(why, _HINTED)})
@@ -123,13 +124,15 @@ def run(args: argparse.Namespace) -> int:
     plane = args.projection == "plane"
     homs = [(pano.to_panorama @ pano.homographies[a]) if plane else pano.homographies[a] for a in reg.used]
     homs = [H / H[2, 2] for H in homs]
-    if args.overlay:
-        from ..overlays import draw_quads
+    with io.all_or_none() as outs:  # the panorama and its overlay, both or neither
+        io.save_image(outs.path(args.out), pano.image)
+        if args.overlay:
+            from ..overlays import draw_quads
 
-        shapes = [images[a].shape for a in reg.used]
-        quads = [_outline(H, sh[1], sh[0]) for H, sh in zip(homs, shapes)]
-        io.save_image(args.overlay, draw_quads(pano.image, quads, [Path(args.images[positions[a]]).name
-                                                                   for a in reg.used]))
+            shapes = [images[a].shape for a in reg.used]
+            quads = [_outline(H, sh[1], sh[0]) for H, sh in zip(homs, shapes)]
+            io.save_image(outs.path(args.overlay), draw_quads(pano.image, quads, [Path(args.images[positions[a]]).name
+                                                                                  for a in reg.used]))
     result = {
         "out": args.out,
         **({"overlay": args.overlay} if args.overlay else {}),

@@ -398,12 +398,13 @@ class ComputeParams(Section):
     @field_validator("scheduler")
     @classmethod
     def _address(cls, value: str) -> str:
-        """The accepted forms of :func:`cvpipe.compute.check_scheduler` (not imported: params stays light)."""
-        s = value.strip()
-        if s in ("", "local") or ("://" in s and s.split("://", 1)[1]):
-            return s
-        raise PydanticCustomError("scheduler", "must be '' (in process), 'local' or a scheduler address like "
-                                               "tcp://host:8786")
+        """The accepted forms of :func:`cvpipe.compute.check_scheduler` (a light import: no Dask)."""
+        from ..compute import scheduler_problem
+
+        problem = scheduler_problem(value)
+        if problem is None:
+            return value.strip()
+        raise PydanticCustomError("scheduler", problem.replace("{", "{{").replace("}", "}}"))
 
 
 #: dotted params.yaml section -> model; the defaults test walks this table. ``compute`` is in no stage's
