@@ -1,20 +1,28 @@
-# `make run`: venv + install + `dvc repro` on the bundled samples.  `make test`: venv + install + the test suite.
+# `make run`: venv + install + `dvc repro` on the bundled samples.  `make test`: venv + install + the test suite (its
+# fast tier, on every core; minutes).  `make test-all`: the slow tier as well (dvc pipeline runs in copies of the
+# repository, the browser, 81 MP images, real clusters).  `make guard`: the speed guard (`cvpipe bench guard`).
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(CURDIR)/$(VENV)/bin
 export NUMBA_CACHE_DIR ?= $(CURDIR)/.numba_cache
 
-.PHONY: run test test-fast bench clean-venv
+.PHONY: run test test-all test-slow guard bench clean-venv
 
 run: $(VENV)/.installed
 	PATH="$(BIN):$$PATH" $(BIN)/dvc repro
 
 test: $(VENV)/.installed
-	PATH="$(BIN):$$PATH" $(BIN)/python -m pytest -q
+	PATH="$(BIN):$$PATH" $(BIN)/python -m pytest -q -m "not slow" -n auto
 
-# the inner loop: everything but the slow tier (dvc pipeline runs, the browser, 81 MP images, real clusters)
-test-fast: $(VENV)/.installed
-	PATH="$(BIN):$$PATH" $(BIN)/python -m pytest -q -m "not slow"
+test-slow: $(VENV)/.installed
+	PATH="$(BIN):$$PATH" $(BIN)/python -m pytest -q -m slow
+
+test-all: test test-slow
+
+# the bundled samples first: the guard measures on them (and on $$CVPIPE_DATA where set)
+guard: $(VENV)/.installed
+	PATH="$(BIN):$$PATH" $(BIN)/dvc repro samples
+	PATH="$(BIN):$$PATH" $(BIN)/cvpipe bench guard
 
 bench: $(VENV)/.installed
 	PATH="$(BIN):$$PATH" $(BIN)/cvpipe bench pipeline
