@@ -244,3 +244,46 @@ def not_processed_table(dropped: Sequence[Mapping[str, Any]]) -> list[dict]:
     """
     rows = [[d["item"], d["reason"]] for d in dropped]
     return [{"title": "Not processed", "columns": ["input", "reason"], "rows": rows}] if rows else []
+
+
+#: the figures that a task's tracked metrics file keeps: its ``all`` rows, the few numbers that ``dvc exp show`` and
+#: ``dvc metrics diff`` compare across experiments (everything per item goes to the stage's details file)
+HEADLINE = {
+    "hough": ("images", "identical_images", "parity_mean", "recall_ours", "recall_opencv"),
+    "homography": ("median_corner_error_px", "success_rate", "median_inliers"),
+    "defect": ("faulty", "perfect", "f1", "false_alarms"),
+    "logo": ("precision", "recall", "answered"),
+    "stereo": ("bad_2", "valid_fraction", "rectified", "vertical_error_median_px_worst", "depth_pairs"),
+    "panorama": ("used_images", "ok_sets", "median_corner_error_px"),
+}
+#: decimals of the figures in a metrics file: pixel errors to 1e-4 px, rates and shares to 1e-4, so that noise below
+#: that never shows as a change
+METRIC_DECIMALS = 4
+
+
+def headline(metrics: Mapping[str, Any]) -> dict:
+    """The headline of a stage's metrics ``{task: {...}}``: the ``all`` figures named in :data:`HEADLINE` for the
+    task, at any depth (``{"logo": {"sift": {"all": {...}}}}``), floats rounded to :data:`METRIC_DECIMALS`.
+
+    Examples
+    --------
+    >>> headline({"logo": {"sift": {"all": {"precision": 0.912345678, "scenes": 40}, "nike": {"precision": 1.0}}}})
+    {'logo': {'sift': {'all': {'precision': 0.9123}}}}
+    """
+
+    def keep(node: Mapping[str, Any], names: tuple) -> dict:
+        out: dict = {}
+        for key, value in node.items():
+            if key == "all" and isinstance(value, Mapping):
+                row = {k: round(v, METRIC_DECIMALS) if isinstance(v, float) else v
+                       for k, v in value.items() if k in names}
+                if row:
+                    out[key] = row
+            elif isinstance(value, Mapping):
+                sub = keep(value, names)
+                if sub:
+                    out[key] = sub
+        return out
+
+    return {task: keep(body, HEADLINE.get(task, ())) for task, body in metrics.items() if isinstance(body, Mapping)}
+

@@ -33,6 +33,7 @@ from typing import Any, Callable, Iterable, Iterator, Sequence, TypeVar
 
 from cvpipe import io
 from cvpipe.errors import CvpipeError, EstimationError, InputError
+from cvpipe.metrics import headline
 from cvpipe.params import SECTIONS, load_section
 
 T = TypeVar("T")
@@ -48,6 +49,13 @@ TIMINGS_DIR = Path("outputs/timings")
 PARAM_SUFFIX = "-param"
 #: overrides ``compute.scheduler`` of the params file for the stages that fan out (:meth:`Stage.map`)
 SCHEDULER_ENV = "CVPIPE_COMPUTE_SCHEDULER"
+
+
+def details_path(metrics_path: str | os.PathLike) -> Path:
+    """Where a stage's full metrics go beside its headline metrics file: ``metrics_sgm.json`` -> ``details_sgm.json``
+    (a cached DVC output, while the metrics file is tracked by git)."""
+    p = Path(metrics_path)
+    return p.with_name(p.name.replace("metrics", "details", 1) if "metrics" in p.name else f"details_{p.name}")
 
 
 @dataclass
@@ -164,10 +172,17 @@ class Stage:
         (``--metrics``), the ``dvc plots`` rows (``--plots``/<name>.json); what earlier stages dropped is carried."""
         io.save_json(self.args.summary, summary)
         if metrics is not None:
-            io.save_json(self.args.metrics, metrics)
+            self.save_metrics(self.args.metrics, metrics)
         for name, rows in (plots or {}).items():
             io.save_json(Path(self.args.plots) / f"{name}.json", rows)
         self.carry(dropped)
+
+    def save_metrics(self, path: str | os.PathLike, metrics: dict) -> None:
+        """The git-tracked metrics file ``path`` gets the headline of ``metrics`` (:func:`cvpipe.metrics.headline`:
+        the few figures experiments are compared by, at the precision they carry); all of ``metrics``, per item,
+        goes to the cached details file beside it (:func:`details_path`)."""
+        io.save_json(path, headline(metrics))
+        io.save_json(details_path(path), metrics)
 
     def carry(self, dropped: Iterable[dict]) -> None:
         """Repeat what an earlier stage dropped (``{"item", "reason"}`` records) in this stage's summary line."""

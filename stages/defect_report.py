@@ -45,7 +45,7 @@ def defect_report(st: Stage) -> None:
             io.save_image(out / f"{key}.png", rep.montage(images, COLS))
             pictures.append({"path": (out / f"{key}.png").as_posix(), "caption": caption})
     dropped = [{"item": r["probe"], "reason": r["error"]} for r in records if r["verdict"] is None]
-    io.save_json(out / "metrics.json", rep.metrics_of(records, evaluated))
+    st.save_metrics(out / "metrics.json", rep.metrics_of(records, evaluated))
     io.save_json(out / "plots" / "confusion.json", rep.confusion_rows(records, truth))
     io.save_json(out / "plots" / "scores.json", rep.score_rows(records))
     io.save_json(out / "summary.json", rep.report_summary(records, registration["probes"], evaluated, pictures,

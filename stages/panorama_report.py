@@ -44,7 +44,7 @@ def panorama_report(st: Stage) -> None:
     opencv = _records(a.opencv, names)
     results = pr.compare_sets(sets, homs, blends, crops, opencv)
     dropped = pr.not_processed(io.load_json(Path(a.features) / "dropped.json"), homs, crops, opencv)
-    io.save_json(a.metrics, pr.metrics_of(results))
+    st.save_metrics(a.metrics, pr.metrics_of(results))
     io.save_json(a.summary, pr.report_summary(results, _pictures(st, results), dropped))
     io.save_json(Path(a.plots) / "sets.json", pr.quality_plot(results))
     ok = sum(r["ours"]["ok"] for r in results)

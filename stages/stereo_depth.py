@@ -48,7 +48,7 @@ def stereo_depth(st: Stage) -> None:
         results[name], units[name] = stereo.depth_result(z, len(xyz), geo), geo["unit"]
     io.save_json(out / "run.json", {"method": disp_run["method"], "pairs": results, "units": units,
                                     "disparity_only": only, "dropped": st.dropped})
-    io.save_json(a.metrics, stereo.depth_metrics(results))
+    st.save_metrics(a.metrics, stereo.depth_metrics(results))
     st.made(f"{len(results)} depth maps and point clouds in {out}" +
             (f"; disparity only (no calibration): {', '.join(only)}" if only else ""))
 

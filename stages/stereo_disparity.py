@@ -67,7 +67,7 @@ def stereo_disparity(st: Stage) -> None:
         results[name] = {**stereo.pair_result(disp, max_disps[name], truth), "truth": truth is not None}
     result = {"method": method, "pairs": results, "dropped": st.dropped, "max_disp_from": sources}
     io.save_json(out / "run.json", result)
-    io.save_json(a.metrics, stereo.metrics_of(result))
+    st.save_metrics(a.metrics, stereo.metrics_of(result))
     if not results:
         raise InputError(f"{a.pairs}: no pair could be processed")
     st.made(f"{len(results)} disparity maps in {out}")

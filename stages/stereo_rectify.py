@@ -38,7 +38,7 @@ def stereo_rectify(st: Stage) -> None:
         io.save_json(out / name / "rect.json", got.record)
         records[name] = got.record
     io.save_json(out / "run.json", {"pairs": records, "dropped": st.dropped})
-    io.save_json(a.metrics, stereo.rectify_metrics(records))
+    st.save_metrics(a.metrics, stereo.rectify_metrics(records))
     if not records:
         raise InputError(f"{a.pairs}: no pair could be rectified")
     kinds = [r["kind"] for r in records.values()]

@@ -454,7 +454,7 @@ def test_stages_give_inspect_results_drop_the_unregistrable_probe_and_rerun_iden
     not_processed = [t for t in summary["tables"] if t["title"] == "Not processed"]
     assert [row[0] for row in not_processed[0]["rows"]] == ["blank.png"]
     assert "2 of 3 probes have ground truth" in summary["description"]
-    metrics = json.loads((o / "metrics.json").read_text())["defect"]
+    metrics = json.loads((o / "details.json").read_text())["defect"]
     leaves = [v for m in metrics.values() for v in m.values()]
     assert all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in leaves)
     assert metrics["faulty"]["faulty"] == 1 and metrics["perfect"]["faulty"] == 0
@@ -478,7 +478,7 @@ def test_stages_give_inspect_results_drop_the_unregistrable_probe_and_rerun_iden
     # without a truth file everything still runs; no accuracy anywhere, nothing to plot in the confusion matrix
     (folder / "truth.json").unlink()
     o = _run_stages(root, folder, tmp_path, root / "params.yaml")
-    metrics = json.loads((o / "metrics.json").read_text())["defect"]
+    metrics = json.loads((o / "details.json").read_text())["defect"]
     assert "accuracy" not in metrics["all"] and "correct" not in metrics["faulty"]
     assert json.loads((o / "plots" / "confusion.json").read_text()) == []
     summary = json.loads((o / "summary.json").read_text())

@@ -186,7 +186,7 @@ def test_stages_end_to_end_with_and_without_truth(tmp_path, pair_files):
         _stage(tmp_path, "stages.homography_report", "--images", "images", "--matches", "m", "--estimates",
                "est/ours", "est/opencv_magsac", "--out", "report", "--metrics", "metrics.json", "--summary",
                "summary.json", "--plots", "plots")
-        return (io.load_json(tmp_path / "metrics.json")["homography"],
+        return (io.load_json(tmp_path / "details.json")["homography"],
                 validate_summary(io.load_json(tmp_path / "summary.json")))
 
     metrics, summary = report()

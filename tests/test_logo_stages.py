@@ -76,7 +76,7 @@ def _run_logo_stages(top: Path) -> tuple[dict, dict]:
     assert p.returncode == 0, p.stderr
     out = top / "out"
     decisions = {r["scene"]: r for r in json.loads((out / "verify" / "sift" / "decisions.json").read_text())["scenes"]}
-    return decisions, json.loads((out / "metrics_sift.json").read_text())
+    return decisions, json.loads((out / "details_sift.json").read_text())
 
 
 @pytest.mark.slow

@@ -74,7 +74,7 @@ def test_stages_on_a_folder_with_partial_truth(tmp_path, views, distractor, monk
                   crop=out / "pano", opencv=out / "opencv", pictures=out / "report", metrics=out / "metrics.json",
                   summary=out / "summary.json", plots=out / "plots")
     _run_stage("panorama_report", monkeypatch, **report)
-    metrics = io.load_json(out / "metrics.json")
+    metrics = io.load_json(out / "details.json")
     ours = metrics["panorama"]["ours"]
     # the median over the three view pairs is one of the two overlapping pairs: within 1.5 px (see
     # test_recovered_homographies_match_truth in test_panorama.py)

@@ -380,7 +380,7 @@ def test_stages_with_and_without_truth(tmp_path, repo_root):
     assert (tmp_path / "out/sgm/planes/disparity.npy").read_bytes() == npy_bytes
     assert b"seconds" not in run_bytes and b"time" not in run_bytes
 
-    m = io.load_json(tmp_path / "metrics_sgm.json")["stereo"]["sgm"]
+    m = io.load_json(tmp_path / "details_sgm.json")["stereo"]["sgm"]
     assert m["planes"]["max_disp"] == MAX_DISP and m["flat"]["max_disp"] == 16  # each pair's own range
     assert set(m["flat"]) == {"max_disp", "valid_fraction", "truth"} and m["all"]["truth_pairs"] == 1
     disp = np.load(tmp_path / "out/sgm/planes/disparity.npy", allow_pickle=False)

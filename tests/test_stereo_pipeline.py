@@ -96,17 +96,17 @@ def pipeline(tmp_path_factory, repo_root):
 
     os.chdir(root)
     try:
-        _stage("stages.stereo_rectify", "--pairs", "pairs", "--out", "out/rectified", "--metrics", "m_rect.json")
+        _stage("stages.stereo_rectify", "--pairs", "pairs", "--out", "out/rectified", "--metrics", "metrics_rect.json")
         first = _tree(root / "out/rectified")
-        _stage("stages.stereo_rectify", "--pairs", "pairs", "--out", "out/rectified", "--metrics", "m_rect.json")
+        _stage("stages.stereo_rectify", "--pairs", "pairs", "--out", "out/rectified", "--metrics", "metrics_rect.json")
         for method in ("opencv_sgbm", "opencv_bm"):
             _stage("stages.stereo_disparity", "--pairs", "pairs", "--rectified", "out/rectified", "--method", method,
-                   "--out", f"out/{method}", "--metrics", f"m_{method}.json")
+                   "--out", f"out/{method}", "--metrics", f"metrics_{method}.json")
         _stage("stages.stereo_depth", "--rectified", "out/rectified", "--disparities", "out/opencv_sgbm", "--out",
-               "out/depth", "--metrics", "m_depth.json")
+               "out/depth", "--metrics", "metrics_depth.json")
         depth_first = _tree(root / "out/depth")
         _stage("stages.stereo_depth", "--rectified", "out/rectified", "--disparities", "out/opencv_sgbm", "--out",
-               "out/depth", "--metrics", "m_depth.json")
+               "out/depth", "--metrics", "metrics_depth.json")
         _stage("stages.stereo_report", "--pairs", "pairs", "--rectified", "out/rectified", "--disparities",
                "out/opencv_sgbm", "out/opencv_bm", "--depth", "out/depth", "--out", "out/report", "--summary",
                "summary.json", "--plots", "plots")
@@ -125,7 +125,7 @@ def test_rectify_kinds_and_the_dropped_pair(pipeline):
     assert run["pairs"]["tilted"]["kind"] == "uncalibrated"  # calib.txt of a rectified rig holds no pose
     assert [d["item"] for d in run["dropped"]] == ["wall"]
     assert "cannot be rectified" in run["dropped"][0]["reason"] and "planar" in run["dropped"][0]["reason"]
-    m = io.load_json(root / "m_rect.json")["stereo"]["rectify"]
+    m = io.load_json(root / "details_rect.json")["stereo"]["rectify"]
     # the targets: median vertical error <= 0.3 px and p95 <= 1 px on the inlier matches
     assert m["tilted"]["vertical_error_median_px"] <= 0.3 and m["tilted"]["vertical_error_p95_px"] <= 1.0
     assert m["tilted"]["rectified"] == 1 and m["bike"]["rectified"] == 0 and "wall" not in m
@@ -153,7 +153,7 @@ def test_rectification_undoes_the_known_transform(pipeline):
 
 def test_disparity_uses_truth_only_in_its_own_frame(pipeline):
     root = pipeline["root"]
-    m = io.load_json(root / "m_opencv_sgbm.json")["stereo"]["opencv_sgbm"]
+    m = io.load_json(root / "details_opencv_sgbm.json")["stereo"]["opencv_sgbm"]
     assert m["bike"]["truth"] == 1 and "bad_2" in m["bike"]
     assert m["tilted"]["truth"] == 0 and "bad_2" not in m["tilted"]  # its truth.npz is in the original frame
     run = io.load_json(root / "out/opencv_sgbm/run.json")
@@ -266,7 +266,7 @@ def test_bad_calibrations_drop_their_pair_and_the_others_go_on(tmp_path, repo_ro
     (tmp_path / "params.yaml").write_text((repo_root / "params.yaml").read_text())
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(repo_root), os.environ.get("PYTHONPATH", "")]))
     proc = subprocess.run([sys.executable, "-m", "stages.stereo_rectify", "--pairs", "pairs", "--out",
-                           "out/rectified", "--metrics", "m_rect.json"], cwd=tmp_path, env=env, capture_output=True,
+                           "out/rectified", "--metrics", "metrics_rect.json"], cwd=tmp_path, env=env, capture_output=True,
                           text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
     assert "Traceback" not in proc.stderr
@@ -284,9 +284,9 @@ def test_bad_calibrations_drop_their_pair_and_the_others_go_on(tmp_path, repo_ro
     os.chdir(tmp_path)
     try:
         _stage("stages.stereo_disparity", "--pairs", "pairs", "--rectified", "out/rectified", "--method",
-               "opencv_bm", "--out", "out/opencv_bm", "--metrics", "m_bm.json")
+               "opencv_bm", "--out", "out/opencv_bm", "--metrics", "metrics_bm.json")
         _stage("stages.stereo_depth", "--rectified", "out/rectified", "--disparities", "out/opencv_bm", "--out",
-               "out/depth", "--metrics", "m_depth.json")
+               "out/depth", "--metrics", "metrics_depth.json")
     finally:
         os.chdir(old)
     run = io.load_json(tmp_path / "out/depth/run.json")
