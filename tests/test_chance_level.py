@@ -1,7 +1,7 @@
 """The test against chance in cvpipe.homography: real benchmark pairs stay accepted, unrelated pairs are refused.
 
 Needs the real data (``$CVPIPE_DATA`` with ``oxford_affine/`` and ``cmp_homogr/``); skips without it. Run as a
-script (``python tests/test_chance_level.py``) to print the counts recorded in BENCHMARKS.md.
+script (``python tests/test_chance_level.py``) to print the counts recorded in docs/notes/homography.md.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from cvpipe.params import FeaturesParams, HomographyEstimateParams, MatchParams
 
 #: a pair is a success within this corner error, px (the homography benchmark's --success-px default)
 SUCCESS_PX = 3.0
-#: number of random pairs of images of different scenes (the issue asks for at least 50)
+#: number of random pairs of images of different scenes (at least 50)
 N_UNRELATED = 60
 
 
@@ -127,7 +127,7 @@ def test_no_real_pair_lost_and_no_unrelated_pair_accepted(data_root):
         assert r["unrelated_accepted"] == 0, (m, r)
 
 
-if __name__ == "__main__":  # pragma: no cover - prints the counts for BENCHMARKS.md
+if __name__ == "__main__":  # pragma: no cover - prints the counts for docs/notes/homography.md
     import json
 
     root = Path(sys.argv[1] if len(sys.argv) > 1 else os.environ.get("CVPIPE_DATA", "../shared/data"))

@@ -1,5 +1,5 @@
-"""Regression tests of issue 17 (hardening): each runs the command or the stage and checks the exit status, the one
-stderr line, the JSON record and the files left behind."""
+"""The command and stage contract on hostile input and interrupts: each test runs the command or the stage and
+checks the exit status, the one stderr line, the JSON record and the files left behind."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The speed-ups of issue 7's third round (blocked nearest-two matching, prefilter counts, homography refinement,
+"""The panorama's speed-ups (blocked nearest-two matching, prefilter counts, homography refinement,
 row/column canvas maps, multiband, refit): each must give what the plain computation gives."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from cvpipe.homography import find_homography
 from test_panorama import _corner_error
 
 
-# ---- speed-ups of issue 7's third round: each must give what the plain computation gives ----
+# ---- each speed-up must give what the plain computation gives ----
 
 
 def _sift_like(rng, n, d=128):

@@ -66,7 +66,7 @@ def test_section_not_a_mapping():
         from_mapping(Demo, [1, 2], "demo")
 
 
-def test_examples_from_the_issue():
+def test_messages_name_the_dotted_key_and_its_allowed_range():
     with pytest.raises(InputError, match=r"^`hough\.lines\.theta_deg` must be in \(0\.0, 180\.0\], got -1$"):
         from_mapping(HoughLinesParams, {"theta_deg": -1}, "hough.lines")
     with pytest.raises(InputError, match=r"^`stereo\.sgm\.paths` must be one of \[4, 8\], got 6$"):
@@ -333,7 +333,7 @@ RANGES, CHOICES, BOUNDS = list(_range_cases()), list(_choice_cases()), list(_bou
 
 
 def test_the_generators_find_the_declared_checks():
-    """A sanity check of the generators themselves: the issue's examples and the cross-field rules are among them."""
+    """A sanity check of the generators themselves: the documented examples and the cross-field rules are among them."""
     ids = {c.id for c in RANGES + CHOICES + BOUNDS}
     assert {"hough.lines.theta_deg>", "stereo.sgm.paths", "logo.features.detector", "stereo.sgm.p2>p1",
             "hough.edges.canny_high>=canny_low", "panorama.match.refit_threshold<=ransac_threshold",

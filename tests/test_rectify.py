@@ -401,7 +401,7 @@ def test_unrectified_sample_is_rectified_against_its_truth():
     pl = np.column_stack([xx[ok], yy[ok]]).astype(float)
     pr = geometry.apply_homography(truth["H_unrectify"], pl - np.column_stack([d[ok], np.zeros(ok.sum())]))
     err = np.abs(geometry.apply_homography(rect.H_left, pl)[:, 1] - geometry.apply_homography(rect.H_right, pr)[:, 1])
-    # the targets (median 0.3 px, p95 1 px); measured ~0.1 / 0.3 px on this pair
+    # the rectification's targets (median 0.3 px, p95 1 px); measured ~0.1 / 0.3 px on this pair
     assert np.median(err) < 0.3 and np.percentile(err, 95) < 1.0
     disp = geometry.apply_homography(rect.H_left, pl)[:, 0] - geometry.apply_homography(rect.H_right, pr)[:, 0]
     # the search range 0 .. max_disp - 1 covers the scene (all but stray truth pixels)

@@ -126,7 +126,7 @@ def test_rectify_kinds_and_the_dropped_pair(pipeline):
     assert [d["item"] for d in run["dropped"]] == ["wall"]
     assert "cannot be rectified" in run["dropped"][0]["reason"] and "planar" in run["dropped"][0]["reason"]
     m = io.load_json(root / "details_rect.json")["stereo"]["rectify"]
-    # the targets: median vertical error <= 0.3 px and p95 <= 1 px on the inlier matches
+    # the rectification's targets: median vertical error <= 0.3 px and p95 <= 1 px on the inlier matches
     assert m["tilted"]["vertical_error_median_px"] <= 0.3 and m["tilted"]["vertical_error_p95_px"] <= 1.0
     assert m["tilted"]["rectified"] == 1 and m["bike"]["rectified"] == 0 and "wall" not in m
     assert m["rig"]["calibrated"] == 1 and m["tilted"]["calibrated"] == 0

@@ -4,8 +4,8 @@ DeepPCB's pairs are pixel-aligned, binarised and every test image is faulty. Eac
 the test image (faulty) and the template itself (perfect), each warped by its own seeded small random homography
 (rotation up to 4 degrees, scale +-5 %, translation up to 15 px, slight perspective) with a gain/bias change, blur and
 noise. The ground-truth boxes are mapped by the same homography. Ours (:func:`cvpipe.defect.inspect`) is compared
-in the same process with the baseline, the seed project's method (SIFT + OpenCV RANSAC homography, plain absolute
-difference, fixed threshold, connected components).
+in the same process with the baseline, a plain registration + difference (SIFT + OpenCV RANSAC homography, plain
+absolute difference, fixed threshold, connected components).
 """
 
 from __future__ import annotations
@@ -132,7 +132,7 @@ def make_probe(img: np.ndarray, boxes: np.ndarray, rng: np.random.Generator) -> 
 
 def baseline_method(reference: np.ndarray, probe: np.ndarray, ref_feats, threshold: float = 50.0,
                 min_area: int = 12) -> np.ndarray:
-    """The baseline, the seed project's inspection: SIFT + cv2.findHomography, warp, ``cv2.absdiff``, fixed
+    """The baseline inspection: SIFT + cv2.findHomography, warp, ``cv2.absdiff``, fixed
     threshold, components.
 
     ``ref_feats`` are the reference's SIFT features. Returns the regions (K, 4) in probe pixels; raises
@@ -179,7 +179,7 @@ def _score(counts: dict, verdicts: list[tuple[str, str]]) -> dict:
 
 def evaluate(pairs: list[dict], seed: int, params: InspectParams, baseline: bool = True,
              progress: bool | None = None) -> dict:
-    """Run ours (and the baseline, the seed project's method) on both probes of every pair; return metrics and
+    """Run ours (and the plain-difference baseline) on both probes of every pair; return metrics and
     timings."""
     import numpy as np
     from tqdm import tqdm

@@ -39,7 +39,7 @@ from .. import geometry, io, stereo
 from ..homography import correspondences
 from ..stereo import rectify
 
-#: unrectifying transform bounds (the issue's benchmark protocol)
+#: unrectifying transform bounds (the benchmark's protocol)
 MAX_ROTATION_DEG = 3.0
 MAX_SHIFT_PX = 8.0
 MAX_SCALE = 0.02
@@ -51,7 +51,7 @@ MOTORCYCLE_K_RIGHT = (994.978, 311.193 + 31.086, 254.877)
 _STEP = 2
 #: inlier threshold (Sampson / reprojection, px) of both methods
 THRESHOLD = 1.0
-#: targets of issue #20
+#: what a rectification is held to: vertical error median and p95 (px), bad-2.0 rise (points), seconds per pair
 TARGETS = {"median_px": 0.3, "p95_px": 1.0, "bad2_points": 2.0, "seconds": 0.2}
 
 

@@ -115,7 +115,7 @@ def numba_kernels(module) -> list:
 
 #: one-off numba compile time of each kernel module, seconds: the cold-cache minus the warm-cache CPU time of the
 #: command that runs them (a subprocess with an empty NUMBA_CACHE_DIR; compilation is single-threaded, so this is
-#: its wall time on an idle machine). Measured 2026-12-01 on the 2-core developer machine: hough 3.3, homography
+#: its wall time on an idle machine). Measured on the 2-core developer machine: hough 3.3, homography
 #: 25.1 (homography), 25.2 (logo), 22.7 (inspect), stereo 39.0, panorama 23.1 (homography + its kernels)
 COMPILE_SECONDS = {"cvpipe.hough._kernels": 3, "cvpipe.homography": 25, "cvpipe.stereo._kernels": 40,
                    "cvpipe.panorama._kernels": 2, "cvpipe._kernels": 1}

@@ -18,6 +18,7 @@ BENCHMARKS = {
     "pipeline": "pipeline",
     "scale": "scale",
     "guard": "guard",
+    "report": "report",
 }
 
 

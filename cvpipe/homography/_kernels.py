@@ -427,7 +427,7 @@ def _lm_refine(src, dst, weight, H0, max_iter):
 
 
 #: the final refinement's loss is Tukey's biweight; hard inliers and a Cauchy-like loss were measured and rejected
-#: (BENCHMARKS.md, "homography": the final refinement paragraph)
+#: (docs/notes/homography.md: the final refinement paragraph)
 @njit(cache=True, error_model="numpy")
 def _weights(e2, thr2, out):
     """IRLS weights of the final refinement from squared residuals: Tukey's biweight (1 - e2 / c^2)^2 within

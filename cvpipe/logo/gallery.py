@@ -191,5 +191,5 @@ def build_gallery(references: Sequence[Reference], min_features: int = _MATCH.mi
     matcher.train()
     brand_of_ref = np.array([brands.index(r.brand) for r in usable], np.int64)
     # mapping the references of one brand into a shared frame and verifying them as one model was measured and
-    # rejected (no gain on FlickrLogos: BENCHMARKS.md, logo); every reference is verified on its own
+    # rejected (no gain on FlickrLogos: docs/notes/logo.md); every reference is verified on its own
     return Gallery(detector, brands, tuple(usable), dropped, ref_of, local_of, brand_of_ref, matcher)

@@ -99,7 +99,7 @@ def match_scene(gallery: Gallery, scene: Features, params: LogoMatchParams | Non
     m_gal = gallery.local_of[idx[rows, cols]]
     m_dist = dist[rows, cols]
     # matching the best references back into the scene (Lowe's ratio within the scene) was measured and rejected:
-    # +1-2 photos on FlickrLogos, within run-to-run noise, for +0.1 s per SIFT scene (BENCHMARKS.md, logo)
+    # +1-2 photos on FlickrLogos, within run-to-run noise, for +0.1 s per SIFT scene (docs/notes/logo.md)
     # one-to-one per reference: keep the closest scene keypoint of every reference keypoint
     order = np.lexsort((m_dist, m_gal, m_ref))
     m_ref, m_gal, rows, m_dist = m_ref[order], m_gal[order], rows[order], m_dist[order]

@@ -171,7 +171,7 @@ def refit(src: np.ndarray, dst: np.ndarray, H: np.ndarray, inliers: np.ndarray, 
     The first fit's threshold (3 px) lets matches with errors of up to 3 px pull on the least-squares estimate;
     refitting on the inliers within ``threshold`` of a consensus model of those inliers estimates the pair from
     its most precise matches. On the Adobe sets this lowered the geometric mean of the pairwise corner errors
-    against the ground truth by about 4-8 % (see BENCHMARKS.md).
+    against the ground truth by about 4-8 % (see docs/notes/panorama.md).
 
     Parameters
     ----------

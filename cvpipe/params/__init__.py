@@ -278,7 +278,7 @@ LogoModel = Literal["affine_homography", "homography"]
 
 #: score a second or later logo of a scene needs (the first needs ``score_threshold``; the higher one counts).
 #: Chosen on ``cvpipe bench logo --protocol loo``, where no value up to 296 loses or gains anything, so the lowest:
-#: no stricter rule (BENCHMARKS.md, "logo: several brands per photo")
+#: no stricter rule (docs/notes/logo.md, "Several brands per photo")
 DEFAULT_EXTRA_SCORE = 0.0
 
 
