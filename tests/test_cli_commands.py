@@ -87,15 +87,11 @@ def test_help_and_version_import_neither_cv2_nor_numba(argv):
             # numpy too: ~0.12 s of the 0.3 s budget, and no --help needs it
             "heavy = sorted(m for m in ('cv2', 'numba', 'scipy', 'numpy') if m in sys.modules)\n"
             "print('RESULT', ','.join(heavy) or '-', time.perf_counter() - t0, file=sys.stderr)\n")
-    t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=_env(), cwd=ROOT)
-    wall = time.perf_counter() - t0
     last = proc.stderr.strip().splitlines()[-1].split()
     assert last[0] == "RESULT", proc.stderr
     assert last[1] == "-", f"cvpipe {' '.join(argv)} imported {last[1]}"
-    # generous: ~0.1 s when idle; the bound only catches a heavy import sneaking back (cv2 + numba alone are ~1 s,
-    # and this machine is shared, so wall times vary several-fold)
-    assert wall < 2.0, f"cvpipe {' '.join(argv)} took {wall:.2f} s"
+    # its time is measured by `cvpipe bench guard` (row version_s), never asserted here
 
 
 def test_a_command_imports_only_what_it_runs(workdir):
