@@ -286,7 +286,7 @@ def _panorama_sets(ctx: dict) -> dict:
     if ctx["data"] is not None:
         from .panorama import SETS
 
-        for name in ("budapest", "goldengate"):
+        for name in ("budapest",):
             folder, files, _ = SETS[name]
             paths = [ctx["data"] / folder / f for f in files]
             if all(p.is_file() for p in paths):
@@ -428,6 +428,17 @@ def read_limits(path: str | os.PathLike) -> dict[str, tuple[float, str]]:
     return limits
 
 
+def _cpu_model() -> str:
+    """The CPU's model name from /proc/cpuinfo ("unknown" elsewhere)."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return "unknown"
+
+
 def run(args: argparse.Namespace) -> int:
     from .. import io
 
@@ -463,7 +474,8 @@ def run(args: argparse.Namespace) -> int:
                         "over": r.name in over, "what": r.what, "accuracy": r.accuracy, "items": r.items,
                         **r.detail})
     summary = {"rows": results, "over": over, "no_limit": missing, "seconds": seconds,
-               "load_average_1min": [load0, os.getloadavg()[0]], "cpus": os.cpu_count(),
+               "load_average_1min": [load0, os.getloadavg()[0]], "cpus": os.cpu_count(), "machine": _cpu_model(),
+               "command": "cvpipe bench guard" + (" --data $CVPIPE_DATA" if data is not None else ""),
                "data": None if data is None else str(data)}
     if args.out:
         io.save_json(args.out, summary)
