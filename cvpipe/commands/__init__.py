@@ -16,6 +16,8 @@ import sys
 import time
 from typing import Iterable, Iterator, TypeVar
 
+from .. import interrupt
+
 T = TypeVar("T")
 
 log = logging.getLogger("cvpipe")
@@ -54,30 +56,40 @@ class _StderrHandler(logging.StreamHandler):
 
 
 def progress(items: Iterable[T], desc: str, total: int | None = None) -> Iterable[T]:
-    """``items`` with a tqdm bar on stderr; none when stderr is not a terminal, with ``-q`` or for a single item."""
+    """``items`` with a tqdm bar on stderr (none when stderr is not a terminal, with ``-q`` or for a single item),
+    each handed out after :func:`cvpipe.interrupt.check`: a Ctrl-C ends the command between items."""
     if total is None and hasattr(items, "__len__"):
         total = len(items)  # type: ignore[arg-type]
     if _quiet or (total is not None and total < 2):
-        return items
+        return interrupt.checked(items)
     from tqdm import tqdm
 
-    return tqdm(items, desc=desc, total=total, disable=None, dynamic_ncols=True, leave=False)
+    return interrupt.checked(tqdm(items, desc=desc, total=total, disable=None, dynamic_ncols=True, leave=False))
 
 
 @contextlib.contextmanager
 def step(name: str) -> Iterator[None]:
     """Log ``name`` and its wall time at INFO level (shown with ``-v``).
 
-    A Ctrl-C that a library swallowed during the step (:func:`cvpipe._entry.seen`) is raised at its end, before the
-    command writes or prints anything from a step that may be incomplete.
+    A Ctrl-C recorded before the step or during it (:func:`cvpipe.interrupt.check`) ends the command at the step's
+    start or end, before the command writes or prints anything from a step that may be incomplete.
     """
-    from .. import _entry
-
+    interrupt.check()
     t0 = time.perf_counter()
     yield
     log.info("%s: %.3f s", name, time.perf_counter() - t0)
-    if _entry.seen():
-        raise KeyboardInterrupt
+    interrupt.check()
+
+
+def final_output() -> None:
+    """Mark where the command's work is done and its results go out (files, then stdout).
+
+    An interrupt recorded before this point ends the command here (exit 130, nothing of the results written); a
+    Ctrl-C from here on is ignored (:func:`cvpipe.interrupt.ignore`), so the results are never cut short, and an
+    interrupt's record never follows them on stdout.
+    """
+    interrupt.ignore()
+    interrupt.check()
 
 
 def note(message: str) -> None:
