@@ -22,7 +22,7 @@ import sys
 import warnings
 from types import ModuleType
 
-from . import __version__
+from . import __version__, interrupt
 from .errors import BudgetWarning, CvpipeError
 
 _SHOW_WARNING = warnings.showwarning
@@ -205,26 +205,16 @@ def _note(message, category, filename, lineno, file=None, line=None) -> None:
 
 
 def _unraisable(hook):
-    """A ``sys.unraisablehook`` that turns a Ctrl-C swallowed in a C callback into a real interrupt.
+    """A ``sys.unraisablehook`` that records a ``KeyboardInterrupt`` raised where it cannot propagate.
 
-    numba's cache and LLVM callbacks run Python code from C; a KeyboardInterrupt raised there cannot propagate
-    and Python would print its traceback and carry on. Raising it again inside this hook would only be reported
-    as "Exception ignored in sys.unraisablehook", so the interrupt is recorded (:func:`cvpipe._entry.mark`) and
-    delivered again a moment later from a helper thread, when the main thread is back in ordinary Python code: the
-    command stops with exit 130 and one line.
+    Python code run from C (a ``__del__``, a callback of a compiled library) cannot pass an exception on; Python
+    would print its traceback and carry on. The interrupt is recorded instead (:func:`cvpipe.interrupt.mark`), and the
+    command stops at its next check (:func:`cvpipe.interrupt.check`) with exit 130 and one line.
     """
 
     def on_unraisable(info):
         if info.exc_type is not None and issubclass(info.exc_type, KeyboardInterrupt):
-            import _thread
-            import threading
-
-            from . import _entry
-
-            _entry.mark()
-            timer = threading.Timer(0.01, _thread.interrupt_main)
-            timer.daemon = True
-            timer.start()
+            interrupt.mark()
             return
         hook(info)
 
@@ -276,6 +266,7 @@ def main(argv: list[str] | None = None) -> int:
     warnings.showwarning = _note
     sys.unraisablehook = _unraisable(unraisable)
     try:
+        interrupt.check()  # one that came during the start-up: no command, no --version, just the interrupt
         parser = build_parser()
         args, code = _parse(parser, args_list, json_mode)
         if args is None:
@@ -283,6 +274,7 @@ def main(argv: list[str] | None = None) -> int:
         from .commands import configure_output
 
         configure_output(verbose=args.verbose, quiet=args.quiet)
+        interrupt.check()
         return int(args._run(args) or 0)
     except BaseException as exc:  # noqa: BLE001 - the one place that turns every failure into the contract
         if isinstance(exc, SystemExit):
@@ -294,22 +286,14 @@ def main(argv: list[str] | None = None) -> int:
                 os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             return 141
         message, file, code = _classify(exc)
-        code = _fail(message, file, code, json_mode)
-        if code == 130 and argv is None:
-            # run as the program: leave now with 130. A Ctrl-C that numba swallowed in a C callback may have left
-            # CPython's "unhandled KeyboardInterrupt" mark, which would turn a normal exit into death by SIGINT;
-            # every temporary is already gone (the context managers ran on the way out)
-            with contextlib.suppress(Exception):
-                sys.stdout.flush()
-                sys.stderr.flush()
-            os._exit(130)
-        return code
+        if code == 130:
+            interrupt.ignore()  # ending now: a further Ctrl-C must not add a second line
+        return _fail(message, file, code, json_mode)
     finally:
         warnings.showwarning = shown
         sys.unraisablehook = unraisable
 
 
-if __name__ == "__main__":  # ``python -m cvpipe.cli``: the program, with its Ctrl-C handling
-    from cvpipe._entry import main as _program
-
-    sys.exit(_program())
+if __name__ == "__main__":  # ``python -m cvpipe.cli``: the program, with its Ctrl-C handling (as cvpipe._entry)
+    interrupt.install(record=interrupt.JSON_RECORD if "--json" in sys.argv[1:] else None)
+    sys.exit(interrupt.run(main))

@@ -34,6 +34,7 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
+from . import interrupt
 from .errors import EstimationError, InputError
 
 #: the worker environment of a ``local`` cluster: one thread per worker for every threaded library we use
@@ -274,7 +275,7 @@ def _progress_callback(progress: Any, total: int | None) -> tuple[Callable[[int]
 
 
 def _serial(fn, items, shared, with_shared, update) -> Iterator[ItemResult]:
-    for i, item in enumerate(items):
+    for i, item in enumerate(interrupt.checked(items)):
         ok, value, etype, *exc = _run_one(fn, item, shared, with_shared, keep=True)
         yield ItemResult(i, value, None, None) if ok else ItemResult(i, None, value, etype, exception=exc[0])
         update(i + 1)
@@ -494,6 +495,7 @@ def _windowed(client, fn, items, shared, with_shared, window, retries, progress,
     refill = max(1, window // 4)  # scatter in batches: fewer round trips, the window stays nearly full
     try:
         while True:
+            interrupt.check()  # a Ctrl-C ends the run between rounds; the finally below cancels what is pending
             free = window - (next_submit - next_yield)
             if not exhausted and free > 0 and (free >= refill or not pending):
                 batch = []

@@ -588,8 +588,11 @@ T = TypeVar("T")
 def progress(iterable: Iterable[T], desc: str, total: int | None = None) -> Iterable[T]:
     """``iterable`` with a tqdm progress bar on stderr, shown only when stderr is a terminal (quiet under DVC/CI).
 
-    Used by every per-image loop of the stages and benchmarks, so they all behave the same way.
+    Used by every per-image loop of the stages and benchmarks, so they all behave the same way; each item is handed
+    out after :func:`cvpipe.interrupt.check`, so a Ctrl-C ends the loop between items.
     """
     from tqdm import tqdm
 
-    return tqdm(iterable, desc=desc, total=total, disable=None, dynamic_ncols=True)
+    from . import interrupt
+
+    return interrupt.checked(tqdm(iterable, desc=desc, total=total, disable=None, dynamic_ncols=True))

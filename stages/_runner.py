@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Sequence, TypeVar
 
-from cvpipe import io
+from cvpipe import interrupt, io
 from cvpipe.errors import CvpipeError, EstimationError, InputError
 from cvpipe.metrics import headline
 from cvpipe.params import SECTIONS, load_section
@@ -291,22 +291,33 @@ def run(fn: Callable[[Stage], Any], *, section: str | Sequence[str] | None = Non
         The stage name in messages; defaults to the function's name.
     item : str, optional
         For a matrix stage, the option whose value completes the name (``hough_lines@ours``).
+    argv : list of str, optional
+        The arguments (default ``sys.argv[1:]``). Without them the stage is the program, and takes over Ctrl-C
+        (:mod:`cvpipe.interrupt`): the first one ends the stage between items and steps with exit 130 and the one
+        line ``<stage>: error: interrupted``, a second one at once.
     """
+    stage_name = name or fn.__name__
+    program = argv is None  # run as `python -m stages.<name>`: this process's Ctrl-C is the stage's
+    if program:
+        interrupt.install(line=f"{stage_name}: error: interrupted")
     doc = sys.modules[fn.__module__].__doc__ or ""
     ns = _parser(doc, args, options or {}).parse_args(argv)
-    stage_name = name or fn.__name__
     if item is not None:
         stage_name = f"{stage_name}@{getattr(ns, item)}"
+        if program:
+            interrupt.install(line=f"{stage_name}: error: interrupted")
     st = Stage(name=stage_name, args=ns)
     status = 0
     t0 = time.perf_counter()
     try:
+        interrupt.check()
         _resolve_path_params(ns, args)
         names = [section] if isinstance(section, str) else list(section or [])
         for sec in names:
             st.sections[sec] = load_section(SECTIONS[sec], sec, ns.params)
         st.params = st.sections[names[0]] if names else None
         fn(st)
+        interrupt.check()
     except EstimationError as exc:
         status = 1
         print(f"{stage_name}: error: {exc}", file=sys.stderr)
@@ -314,13 +325,14 @@ def run(fn: Callable[[Stage], Any], *, section: str | Sequence[str] | None = Non
         status = 2
         print(f"{stage_name}: error: {exc}", file=sys.stderr)
     except KeyboardInterrupt:
+        interrupt.ignore()  # ending now: a further Ctrl-C must not add a second line
         status = 130
-        print(f"{stage_name}: interrupted", file=sys.stderr)
+        print(f"{stage_name}: error: interrupted", file=sys.stderr)
     if status == 0:
         st.timings["total"] = time.perf_counter() - t0
         _write_timings(st)
         print(st.summary_line())
-    sys.exit(status)
+    sys.exit(interrupt.finish(status))
 
 
 def _write_timings(st: Stage) -> None:

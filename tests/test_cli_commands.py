@@ -148,22 +148,29 @@ def test_a_bad_image_fails_before_the_compile_note(argv, workdir, tmp_path):
 
 
 def test_every_numba_kernel_is_cached_on_disk():
-    """A kernel without cache=True would recompile in every process: the warm start-up depends on all of them."""
-    import importlib
-    import pkgutil
+    """A kernel without cache=True would recompile in every process: the warm start-up depends on all of them.
 
-    import cvpipe
+    Read from the decorators in the source (``@njit(..., cache=True)``), so kernels of every module count, imported or
+    not."""
+    import ast
 
-    kernels = []
-    for info in pkgutil.walk_packages(cvpipe.__path__, "cvpipe."):
-        if info.name.startswith(("cvpipe.bench", "cvpipe.commands")):
-            continue
-        module = importlib.import_module(info.name)
-        kernels += [(info.name, k) for k, v in vars(module).items()
-                    if hasattr(v, "py_func") and getattr(v, "__module__", None) == info.name]
-    assert kernels
-    uncached = [f"{m}.{k}" for m, k in kernels
-                if type(getattr(importlib.import_module(m), k)._cache).__name__ == "NullCache"]
+    kernels, uncached = [], []
+    for path in sorted((ROOT / "cvpipe").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.FunctionDef):
+                continue
+            for dec in node.decorator_list:
+                call = dec if isinstance(dec, ast.Call) else None
+                target = call.func if call else dec
+                name = target.attr if isinstance(target, ast.Attribute) else getattr(target, "id", "")
+                if name not in ("njit", "jit"):
+                    continue
+                kernels.append(node.name)
+                cached = call is not None and any(k.arg == "cache" and isinstance(k.value, ast.Constant)
+                                                  and k.value.value is True for k in call.keywords)
+                if not cached:
+                    uncached.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name}")
+    assert len(kernels) > 20  # every task's kernels were found
     assert not uncached, f"numba kernels without cache=True: {uncached}"
 
 

@@ -207,7 +207,7 @@ def _stereo_pairs(ctx: dict) -> dict:
     """name -> (left BGR, right BGR, true disparity): the Middlebury pairs and motorcycle when the data root has
     them, else the samples' motorcycle pair."""
     if ctx["data"] is not None and (ctx["data"] / "middlebury_stereo").is_dir():
-        from .stereo import load_pairs
+        from .stereo_pairs import load_pairs
 
         return load_pairs(ctx["data"])
     import numpy as np

@@ -26,6 +26,7 @@ from pathlib import Path
 from . import fresh_cache_output
 from ..errors import InputError
 from ..params import StereoBmParams, StereoSgmParams
+from .stereo_pairs import MIDDLEBURY, disparity_range, load_pairs  # noqa: F401 - the pairs of both benchmarks
 
 if typing.TYPE_CHECKING:  # annotations only: the modules are imported inside the functions that use them,
     # so that `cvpipe bench stereo --help` imports neither numpy nor cv2 nor numba
@@ -35,15 +36,6 @@ if typing.TYPE_CHECKING:  # annotations only: the modules are imported inside th
 HELP = "our semi-global matching vs OpenCV BM/SGBM on Middlebury + motorcycle: bad-1/bad-2, density, time"
 EXAMPLE = "cvpipe bench stereo --data ../shared/data --json"
 
-#: pair -> (folder, left, right, truth of the left image, truth value -> pixels); from middlebury_stereo/SOURCE.txt
-MIDDLEBURY = {
-    "tsukuba": ("tsukuba", "im3.png", "im4.png", "disp3.pgm", 1 / 16),
-    "venus": ("venus", "im2.png", "im6.png", "disp2.pgm", 1 / 8),
-    "cones": ("cones", "im2.png", "im6.png", "disp2.png", 1 / 4),
-    "teddy": ("teddy", "im2.png", "im6.png", "disp2.png", 1 / 4),
-    "adirondack": ("adirondack_2014_quarter", "Adirondack_left.png", "Adirondack_right.png", "Adirondack_gt.png",
-                   1.0),
-}
 #: the OpenCV SGBM configurations searched for the best baseline per pair
 SGBM_BLOCK_SIZES = (3, 5, 7)
 
@@ -75,38 +67,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seeds", type=int, default=1,
                         help="with --rectify: repeat the protocol with the unrectifying seeds SEED .. SEED+N-1")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
-
-
-def load_pairs(root: Path) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """name -> (left BGR, right BGR, true disparity of the left image in pixels, NaN = unknown)."""
-    import numpy as np
-    from .. import io
-
-    base = root / "middlebury_stereo"
-    if not base.is_dir():
-        raise InputError(f"{base}: no such folder (expected the Middlebury pairs, see ../shared/data/README.md)")
-    pairs = {}
-    for name, (folder, left, right, truth, scale) in MIDDLEBURY.items():
-        d = base / folder
-        raw = io.read_image(d / truth, "unchanged")
-        if raw.ndim != 2:
-            raise InputError(f"{d / truth}: expected a single-channel disparity image, got shape {raw.shape}")
-        gt = raw.astype(np.float32) * np.float32(scale)
-        gt[raw == 0] = np.nan
-        pairs[name] = (io.read_image(d / left), io.read_image(d / right), gt)
-    import skimage.data
-
-    left, right, disp = skimage.data.stereo_motorcycle()
-    pairs["motorcycle"] = (np.ascontiguousarray(left[..., ::-1]), np.ascontiguousarray(right[..., ::-1]),
-                           np.where(np.isfinite(disp), disp, np.nan).astype(np.float32))
-    return pairs
-
-
-def disparity_range(truth: np.ndarray) -> int:
-    """Smallest multiple of 16 that exceeds the largest true disparity (OpenCV needs multiples of 16)."""
-    import numpy as np
-
-    return int(np.ceil((np.nanmax(truth) + 1) / 16) * 16)
 
 
 def _compile_seconds() -> dict:

@@ -38,6 +38,7 @@ from tqdm import tqdm
 from .. import geometry, io, stereo
 from ..homography import correspondences
 from ..stereo import rectify
+from .stereo_pairs import disparity_range
 
 #: unrectifying transform bounds (the benchmark's protocol)
 MAX_ROTATION_DEG = 3.0
@@ -147,8 +148,6 @@ def true_fundamental(H_u: np.ndarray) -> np.ndarray:
 
 def run_rectify(args: argparse.Namespace, pairs: dict) -> int:
     """The rectification benchmark over ``pairs`` (name -> (left BGR, right BGR, true disparity))."""
-    from .stereo import disparity_range
-
     if args.repeats < 1:
         from ..errors import InputError
 

@@ -16,6 +16,8 @@ import sys
 import time
 from typing import Iterable, Iterator, TypeVar
 
+from .. import interrupt
+
 T = TypeVar("T")
 
 log = logging.getLogger("cvpipe")
@@ -54,30 +56,40 @@ class _StderrHandler(logging.StreamHandler):
 
 
 def progress(items: Iterable[T], desc: str, total: int | None = None) -> Iterable[T]:
-    """``items`` with a tqdm bar on stderr; none when stderr is not a terminal, with ``-q`` or for a single item."""
+    """``items`` with a tqdm bar on stderr (none when stderr is not a terminal, with ``-q`` or for a single item),
+    each handed out after :func:`cvpipe.interrupt.check`: a Ctrl-C ends the command between items."""
     if total is None and hasattr(items, "__len__"):
         total = len(items)  # type: ignore[arg-type]
     if _quiet or (total is not None and total < 2):
-        return items
+        return interrupt.checked(items)
     from tqdm import tqdm
 
-    return tqdm(items, desc=desc, total=total, disable=None, dynamic_ncols=True, leave=False)
+    return interrupt.checked(tqdm(items, desc=desc, total=total, disable=None, dynamic_ncols=True, leave=False))
 
 
 @contextlib.contextmanager
 def step(name: str) -> Iterator[None]:
     """Log ``name`` and its wall time at INFO level (shown with ``-v``).
 
-    A Ctrl-C that a library swallowed during the step (:func:`cvpipe._entry.seen`) is raised at its end, before the
-    command writes or prints anything from a step that may be incomplete.
+    A Ctrl-C recorded before the step or during it (:func:`cvpipe.interrupt.check`) ends the command at the step's
+    start or end, before the command writes or prints anything from a step that may be incomplete.
     """
-    from .. import _entry
-
+    interrupt.check()
     t0 = time.perf_counter()
     yield
     log.info("%s: %.3f s", name, time.perf_counter() - t0)
-    if _entry.seen():
-        raise KeyboardInterrupt
+    interrupt.check()
+
+
+def final_output() -> None:
+    """Mark where the command's work is done and its results go out (files, then stdout).
+
+    An interrupt recorded before this point ends the command here (exit 130, nothing of the results written); a
+    Ctrl-C from here on is ignored (:func:`cvpipe.interrupt.ignore`), so the results are never cut short, and an
+    interrupt's record never follows them on stdout.
+    """
+    interrupt.ignore()
+    interrupt.check()
 
 
 def note(message: str) -> None:
@@ -87,18 +99,28 @@ def note(message: str) -> None:
 
 
 def kernels_cached(*dispatchers) -> bool:
-    """True when every numba dispatcher given has a valid entry in its on-disk cache (``cache=True``).
+    """True when every numba dispatcher given has an index file in numba's on-disk cache (``cache=True``).
 
-    Reads numba's cache index the way numba does (a stale index, e.g. after an upgrade or an edit, counts as
-    missing). Anything unexpected in numba's internals counts as cached, so the worst case is a missing note.
+    Decided from the files alone: numba writes ``<module>.<function>-<first line>.py<XY>.nbi`` into the
+    ``__pycache__`` folder next to the module, or, with ``NUMBA_CACHE_DIR`` set, into ``<folder>_<sha1 of the
+    folder's path>`` under it. An edit that moves a kernel's first line changes the name, so its old index does not
+    count; an index that numba itself finds stale (an edit elsewhere in the file, a numba upgrade) does, so the worst
+    case is a missing note.
     """
+    import hashlib
+
+    tag = f"py{sys.version_info.major}{sys.version_info.minor}"
+    cache_root = os.environ.get("NUMBA_CACHE_DIR", "")
     for d in dispatchers:
-        try:
-            cache_file = d._cache._cache_file
-            if not os.path.exists(cache_file._index_path) or not cache_file._load_index():
-                return False
-        except Exception:  # noqa: BLE001 - numba internals; never let the note break a command
-            continue
+        func = d.py_func
+        folder, module_file = os.path.split(os.path.abspath(func.__code__.co_filename))
+        index = f"{os.path.splitext(module_file)[0]}.{func.__qualname__}-{func.__code__.co_firstlineno}.{tag}.nbi"
+        places = [os.path.join(folder, "__pycache__")]
+        if cache_root:
+            sub = f"{os.path.basename(folder)}_{hashlib.sha1(folder.encode()).hexdigest()}"
+            places.insert(0, os.path.join(cache_root, sub))
+        if not any(os.path.exists(os.path.join(p, index)) for p in places):
+            return False
     return True
 
 
@@ -108,8 +130,10 @@ def numba_kernels(module) -> list:
     if hasattr(module, "__path__"):
         subs = [m for n, m in sorted(sys.modules.items()) if n.startswith(module.__name__ + ".")]
         return [k for m in subs for k in numba_kernels(m)]
+    from numba.extending import is_jitted
+
     return [v for v in vars(module).values()
-            if hasattr(v, "_cache") and hasattr(v, "py_func") and getattr(v, "__module__", None) == module.__name__
+            if is_jitted(v) and getattr(v, "__module__", None) == module.__name__
             and getattr(v, "targetoptions", {}).get("inline") != "always"]
 
 

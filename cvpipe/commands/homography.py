@@ -6,7 +6,7 @@ import argparse
 
 from ..params import FeaturesParams, HomographyEstimateParams, MatchParams
 from . import (DETECTORS, add_feature_arguments, add_param_options, add_result_arguments,  # noqa: F401
-               compile_note, step)  # DETECTORS: the --detector choices (a test keeps them equal)
+               compile_note, final_output, step)  # DETECTORS: the --detector choices (a test keeps them equal)
 
 HELP = "estimate the homography mapping image A to image B (ours or OpenCV's RANSAC/MAGSAC)"
 EXAMPLE = ("cvpipe homography data/samples/homography/0_astronaut_a.jpg data/samples/homography/0_astronaut_b.jpg "
@@ -71,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
             io.save_image(args.overlay, checkerboard_warp(io.read_image(args.a, "color"),
                                                           io.read_image(args.b, "color"), fit.H))
         result["overlay"] = args.overlay
+    final_output()
     if args.json:
         print(io.dumps_json(result))
     else:

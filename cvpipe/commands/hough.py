@@ -7,7 +7,7 @@ import math
 import sys
 
 from ..params import HoughEdgesParams, HoughLinesParams
-from . import add_result_arguments, compile_note, note, overlay_paths, progress, read_images, step
+from . import add_result_arguments, compile_note, final_output, note, overlay_paths, progress, read_images, step
 
 HELP = "find straight lines (standard Hough transform, cv2.HoughLines conventions)"
 EXAMPLE = "cvpipe hough data/samples/hough/synthetic_grid.png --threshold 100 --max-lines 10 --overlay lines.png"
@@ -135,6 +135,7 @@ def run(args: argparse.Namespace) -> int:
         if errors:  # one image: its failure is the one-line error, with the exit status of its kind
             raise type(errors[0])(records[0]["error"], file=errors[0].file)
         del records[0]["image"]  # the single-image record is unchanged: {"lines", "total", "lines_deg", "overlay"}
+    final_output()
     for rec in records:
         if "error" in rec:
             print(f"cvpipe: error: {rec['error']}", file=sys.stderr)

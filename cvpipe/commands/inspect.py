@@ -9,7 +9,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..params import InspectParams, replace
-from . import DETECTORS, add_result_arguments, compile_note, overlay_paths, progress, read_images, with_flags
+from . import (DETECTORS, add_result_arguments, compile_note, final_output, overlay_paths, progress, read_images,
+               with_flags)
 
 if TYPE_CHECKING:
     from .. import defect as defects
@@ -171,6 +172,7 @@ def run(args: argparse.Namespace) -> int:
         raise (InputError if code == 2 else EstimationError)(
             f"none of the {len(errors)} probes could be inspected against {args.reference}; first: "
             f"{results[0]['error']}", file=errors[0].file)
+    final_output()
     for res in results:
         if "error" in res:
             print(f"cvpipe: error: {res['error']}", file=sys.stderr)

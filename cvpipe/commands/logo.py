@@ -9,8 +9,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..params import LogoFeaturesParams, LogoMatchParams, LogoVerifyParams
-from . import (DETECTORS, add_feature_arguments, add_result_arguments, compile_note, overlay_paths,  # noqa: F401
-               progress, read_images, step)  # DETECTORS: the ``--method`` choices (a test keeps them equal)
+from . import (DETECTORS, add_feature_arguments, add_result_arguments, compile_note, final_output,  # noqa: F401
+               overlay_paths, progress, read_images,
+               step)  # DETECTORS: the ``--method`` choices (a test keeps them equal)
 
 if TYPE_CHECKING:
     from .. import logo
@@ -206,6 +207,7 @@ def run(args: argparse.Namespace) -> int:
                 records[-1]["error"] = str(exc)
                 continue
             records[-1]["overlay"] = picture
+    final_output()
     if args.json:
         print(io.dumps_json(records))
     else:

@@ -10,7 +10,7 @@ import sys
 from typing import TYPE_CHECKING
 
 from ..params import StereoBmParams, StereoSgbmParams, StereoSgmParams
-from . import compile_note, note, step
+from . import compile_note, final_output, note, step
 
 if TYPE_CHECKING:
     import numpy as np
@@ -111,6 +111,7 @@ def run(args: argparse.Namespace) -> int:
             z = depth_mod.depth_from_disparity(disp, geometry.focal, geometry.baseline, geometry.doffs)
         except InputError as exc:
             raise InputError(f"{args.calib}: {exc}", file=args.calib) from None
+    final_output()
     # every file or none: a failure of a later one (a full disk) leaves all the older files untouched
     with io.all_or_none() as outs:
         _save_map(outs.path(args.out), disp.astype(np.float32), 0.0, float(max_disp), "px", "disparity")

@@ -9,7 +9,7 @@ from pathlib import Path
 from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
                       PanoramaWarpParams, replace)
 from . import (DETECTORS, add_feature_arguments, add_param_options, add_result_arguments,  # noqa: F401
-               compile_note, log, progress, step, with_flags)
+               compile_note, final_output, log, progress, step, with_flags)
 
 HELP = "stitch overlapping photos (any order) into one seamless, cropped panorama"
 EXAMPLE = "cvpipe stitch data/samples/panorama/coffee/*.jpg -o pano.png --projection plane --json"
@@ -124,6 +124,7 @@ def run(args: argparse.Namespace) -> int:
     plane = args.projection == "plane"
     homs = [(pano.to_panorama @ pano.homographies[a]) if plane else pano.homographies[a] for a in reg.used]
     homs = [H / H[2, 2] for H in homs]
+    final_output()
     with io.all_or_none() as outs:  # the panorama and its overlay, both or neither
         io.save_image(outs.path(args.out), pano.image)
         if args.overlay:

@@ -12,48 +12,6 @@ import math
 import numpy as np
 from numba import njit, prange
 
-#: kernels whose first call has gone through :func:`run` (loaded from the cache, or left to numba)
-_STARTED: set = set()
-
-
-def run(kernel, *args):
-    """``kernel(*args)``; on the kernel's first call its machine code is loaded from numba's disk cache directly.
-
-    numba's own first call of a cached kernel first sets up the code generator for compiling anything (it imports
-    every implementation registry, numba.np.linalg among them, which imports scipy.linalg): about 0.3 s of CPU that
-    loading compiled code does not need, and most of a warm ``cvpipe hough``. Here the entry for the argument types is
-    read the way ``Dispatcher.compile`` reads it on a cache hit, after initialising numba's runtime (the allocator the
-    kernels call). A cache miss, a stale entry or anything unexpected in numba's internals falls back to the normal
-    call, which compiles (and sets everything up) as usual; the machine code run is the same either way.
-    """
-    if kernel not in _STARTED:
-        _STARTED.add(kernel)
-        _load_cached(kernel, args)
-    return kernel(*args)
-
-
-def _load_cached(kernel, args) -> bool:
-    """Add the cached overload of ``kernel`` for the types of ``args``; True when it was loaded from disk."""
-    try:
-        from numba import typeof
-        from numba.core.compiler_lock import global_compiler_lock
-        from numba.core.runtime import rtsys
-
-        sig = tuple(typeof(a) for a in args)
-        if sig in kernel.overloads:
-            return False
-        ctx = kernel.targetctx
-        with global_compiler_lock:
-            rtsys.initialize(ctx)
-            cres = kernel._cache._load_overload(sig, ctx)
-            if cres is None or cres.objectmode:
-                return False
-            ctx.insert_user_function(cres.entry_point, cres.fndesc, [cres.library])
-            kernel.add_overload(cres)
-        return True
-    except Exception:  # noqa: BLE001 - numba internals; the normal call path loads or compiles the kernel
-        return False
-
 
 @njit(cache=True)
 def _edge_points(edges):

@@ -74,5 +74,5 @@ def hough_lines_probabilistic(
     order = rng.permutation(npts).astype(np.int64)
     from . import _kernels  # numba only once a transform runs
 
-    return _kernels.run(_kernels._ppht, edges, order, grid.tab_cos, grid.tab_sin, grid.numrho, threshold,
-                        float(min_line_length), int(math.floor(max_line_gap)), min(max_lines, max(npts, 1)))
+    return _kernels._ppht(edges, order, grid.tab_cos, grid.tab_sin, grid.numrho, threshold,
+                          float(min_line_length), int(math.floor(max_line_gap)), min(max_lines, max(npts, 1)))

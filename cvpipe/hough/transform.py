@@ -252,11 +252,11 @@ def hough_accumulator(edges: np.ndarray, grid: HoughGrid, parallel: bool | None 
     from . import _kernels  # here, not at the top: the OpenCV baseline never imports numba
 
     edges = _check_edges(edges)
-    xs, ys = _kernels.run(_kernels._edge_points, edges)
+    xs, ys = _kernels._edge_points(edges)
     threads = numba.get_num_threads() if _use_parallel(parallel, len(xs) * len(grid.tab_cos)) else 1
     if threads > 1:
-        return _kernels.run(_kernels._vote_parallel, xs, ys, grid.tab_cos, grid.tab_sin, grid.numrho, threads)
-    return _kernels.run(_kernels._vote_serial, xs, ys, grid.tab_cos, grid.tab_sin, grid.numrho)
+        return _kernels._vote_parallel(xs, ys, grid.tab_cos, grid.tab_sin, grid.numrho, threads)
+    return _kernels._vote_serial(xs, ys, grid.tab_cos, grid.tab_sin, grid.numrho)
 
 
 def hough_lines(
@@ -317,15 +317,15 @@ def hough_lines(
     acc = hough_accumulator(edges, grid, parallel)
     from . import _kernels
 
-    ns, rs, votes = _kernels.run(_kernels._peaks, acc, threshold)
+    ns, rs, votes = _kernels._peaks(acc, threshold)
     if max_lines is not None:
         ns, rs, votes = ns[:max_lines], rs[:max_lines], votes[:max_lines]
     rho_out, theta_out = grid.rhos(rs), grid.thetas(ns)
     if refine and len(ns):
-        xs, ys = _kernels.run(_kernels._edge_points, edges)
+        xs, ys = _kernels._edge_points(edges)
         band = max(1.5, grid.rho)
-        rho_out, theta_out = _kernels.run(_kernels._refine_fit, xs.astype(np.float64), ys.astype(np.float64),
-                                          rho_out.astype(np.float64), theta_out.astype(np.float64), band, 2)
+        rho_out, theta_out = _kernels._refine_fit(xs.astype(np.float64), ys.astype(np.float64),
+                                                  rho_out.astype(np.float64), theta_out.astype(np.float64), band, 2)
     out = np.empty((len(votes), 3), np.float64)
     out[:, 0] = rho_out
     out[:, 1] = theta_out

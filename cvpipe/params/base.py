@@ -37,7 +37,8 @@ class Bound:
 class Section(BaseModel):
     """Base of every ``params.yaml`` section: frozen, unknown keys refused, strict types, :class:`Bound` checked."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid", strict=True)
+    # defer_build: a section's validator is built on its first use, so a command pays only for the sections it uses
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True, defer_build=True)
 
     def __init__(self, /, **data: Any) -> None:
         try:
