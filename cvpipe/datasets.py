@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, check_int
 from .io import IMAGE_SUFFIXES, load_json, load_npz, read_text
 
 TRUTH_FILE = "truth.json"
@@ -285,10 +285,7 @@ def _stereo_pair(d: Path, name: str) -> StereoPair | str:
         if not isinstance(data, dict):
             raise InputError(f"{d / TRUTH_FILE}: expected a JSON object")
         if "max_disp" in data:
-            v = data["max_disp"]
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise InputError(f"{d / TRUTH_FILE}: field `max_disp` must be an integer >= 1, got {v!r}")
-            max_disp = v
+            max_disp = check_int("max_disp", data["max_disp"], 1, source=str(d / TRUTH_FILE))
     if max_disp is None and calib is not None and calib.suffix == ".txt":
         try:
             text = read_text(calib, "calibration")

@@ -378,7 +378,7 @@ def test_bad_probabilistic_parameters(kwargs, message):
 
 
 def test_bad_opencv_wrapper_and_registry():
-    with pytest.raises(InputError, match=r"`threshold` must be >= 1"):
+    with pytest.raises(InputError, match=r"`threshold` must be an integer >= 1"):
         hough.hough_lines_opencv(np.zeros((10, 10), np.uint8), threshold=0)
     with pytest.raises(InputError, match=r"`impl` must be one of \['opencv', 'ours'\], got 'fast'"):
         hough.get_impl("fast")
