@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from . import interrupt
-from .errors import EstimationError, InputError
+from .errors import EstimationError, InputError, check_int
 
 #: the worker environment of a ``local`` cluster: one thread per worker for every threaded library we use
 WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OPENCV_FOR_THREADS_NUM": "1", "OMP_NUM_THREADS": "1",
@@ -309,8 +309,8 @@ def cluster(scheduler: str, workers: int | None = None, *, timeout: float = CONN
     """
     s = check_scheduler(scheduler, name)
     timeout = check_timeout(timeout)
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 0):
-        raise InputError(f"`compute.workers` must be an integer >= 0 (0 = one per core), got {workers!r}")
+    if workers is not None:
+        workers = check_int("compute.workers", workers, 0, note="0 = one per core")
     if s == "":
         yield None
         return
@@ -425,10 +425,9 @@ def map_items(fn: Callable, items: Iterable, *, scheduler: str = "", workers: in
         runs), or it was lost mid-run (raised after the items that had finished were yielded; the message names
         the address and their number).
     """
-    if window is not None and (isinstance(window, bool) or not isinstance(window, int) or window < 1):
-        raise InputError(f"`compute.window` must be a positive integer, got {window!r}")
-    if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
-        raise InputError(f"`retries` must be an integer >= 0, got {retries!r}")
+    if window is not None:
+        window = check_int("compute.window", window, 1)
+    retries = check_int("retries", retries, 0)
     if total is None and hasattr(items, "__len__"):
         total = len(items)
     with_shared = shared is not None

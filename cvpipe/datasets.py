@@ -16,7 +16,8 @@ Layouts (any of png, jpg/jpeg, tif/tiff, bmp, webp, in any letter case):
   calibration (``calib.txt`` or an OpenCV ``calib.yml`` / ``calib.yaml``) gives depth.
 - panorama: every subfolder is one set, its images in any order.
 
-This module only lists and parses small text files; images are read by :mod:`cvpipe.io`.
+This module lists, parses small text files and reads a stereo pair's ``truth.npz`` (:func:`read_stereo_truth`);
+images are read by :mod:`cvpipe.io`.
 """
 
 from __future__ import annotations
@@ -29,8 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from .errors import InputError
-from .io import IMAGE_SUFFIXES, load_json, read_text
+from .errors import InputError, check_int
+from .io import IMAGE_SUFFIXES, load_json, load_npz, read_text
 
 TRUTH_FILE = "truth.json"
 
@@ -284,10 +285,7 @@ def _stereo_pair(d: Path, name: str) -> StereoPair | str:
         if not isinstance(data, dict):
             raise InputError(f"{d / TRUTH_FILE}: expected a JSON object")
         if "max_disp" in data:
-            v = data["max_disp"]
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise InputError(f"{d / TRUTH_FILE}: field `max_disp` must be an integer >= 1, got {v!r}")
-            max_disp = v
+            max_disp = check_int("max_disp", data["max_disp"], 1, source=str(d / TRUTH_FILE))
     if max_disp is None and calib is not None and calib.suffix == ".txt":
         try:
             text = read_text(calib, "calibration")
@@ -317,6 +315,35 @@ def find_stereo(folder: str | os.PathLike) -> tuple[list[StereoPair], list[dict]
     if not pairs:
         raise InputError(f"{d}: no stereo pair found (a pair folder holds left.<ext> and right.<ext>)")
     return pairs, dropped
+
+
+def read_stereo_truth(path: str | os.PathLike, shape: tuple[int, ...]) -> np.ndarray:
+    """The true disparity of a pair: the ``disparity`` array of its ``truth.npz`` (:attr:`StereoPair.truth`).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The pair's ``truth.npz``.
+    shape : tuple of int
+        ``(H, W)`` of the left image the truth must cover.
+
+    Returns
+    -------
+    ndarray, (H, W) float32
+        Disparity in pixels, NaN where unknown.
+
+    Raises
+    ------
+    InputError
+        The file is unreadable, has no ``disparity`` field, or its shape is not ``shape``.
+    """
+    arrays = load_npz(path)
+    if "disparity" not in arrays:
+        raise InputError(f"{path}: field `disparity` is missing")
+    truth = arrays["disparity"].astype(np.float32)
+    if truth.shape != shape:
+        raise InputError(f"{path}: field `disparity` has shape {truth.shape}, the left image is {shape}")
+    return truth
 
 
 # ------------------------------------------------------------------------------------------------------- panorama

@@ -6,9 +6,13 @@ the CLI exits with status 1. Both derive from the builtin a caller would natural
 
 Every error may carry the file it is about (``file``, a path string or None); the CLI puts it in the JSON record
 ``{"error", "file", "exit"}`` that ``--json`` prints on failure.
+
+:func:`check_int` is the one check of an integer parameter at a public boundary.
 """
 
 from __future__ import annotations
+
+from numbers import Integral
 
 
 class CvpipeError(Exception):
@@ -91,3 +95,61 @@ def check_memory(nbytes: float, what: str, change: str) -> None:
     if nbytes > budget:
         raise BudgetError(f"{what} needs {nbytes / 1e9:.3g} GB, over the memory budget of {budget / 1e9:.3g} GB; "
                           f"{change} (or raise CVPIPE_MEMORY_BUDGET_GB)")
+
+
+def check_int(name: str, value: object, minimum: int | None = None, maximum: int | None = None, *,
+              note: str | None = None, source: str | None = None) -> int:
+    """``value`` as an ``int`` when it is an integer in ``[minimum, maximum]``; else :class:`InputError` naming the
+    parameter and the allowed range.
+
+    Parameters
+    ----------
+    name : str
+        The parameter as its caller spells it (``"max_iters"``, ``"compute.workers"``).
+    value : object
+        A Python or NumPy integer. A bool, a float (even a whole one) or anything else is refused.
+    minimum, maximum : int, optional
+        Inclusive bounds; None leaves that side open.
+    note : str, optional
+        What a special value means, added to the range in parentheses (``"0 = one per core"``).
+    source : str, optional
+        Where the value was read from (a file): the message starts with it and the error carries it as ``file``.
+
+    Returns
+    -------
+    int
+        ``value``.
+
+    Raises
+    ------
+    InputError
+        ``"`name` must be an integer >= minimum, got value"`` (``<= maximum``, ``in [minimum, maximum]``).
+
+    Examples
+    --------
+    >>> check_int("max_iters", 100, 1)
+    100
+    >>> check_int("tiles", 0, 1)
+    Traceback (most recent call last):
+    ...
+    cvpipe.errors.InputError: `tiles` must be an integer >= 1, got 0
+    >>> check_int("bands", True, 1, 12)
+    Traceback (most recent call last):
+    ...
+    cvpipe.errors.InputError: `bands` must be an integer in [1, 12], got True
+    """
+    if not isinstance(value, bool) and isinstance(value, Integral) and \
+            (minimum is None or value >= minimum) and (maximum is None or value <= maximum):
+        return int(value)
+    if minimum is not None and maximum is not None:
+        allowed = f" in [{minimum}, {maximum}]"
+    elif minimum is not None:
+        allowed = f" >= {minimum}"
+    elif maximum is not None:
+        allowed = f" <= {maximum}"
+    else:
+        allowed = ""
+    if note:
+        allowed += f" ({note})"
+    where = f"{source}: " if source else ""
+    raise InputError(f"{where}`{name}` must be an integer{allowed}, got {value!r}", file=source)

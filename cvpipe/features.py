@@ -15,7 +15,7 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from .errors import BudgetWarning, InputError, memory_budget
+from .errors import BudgetWarning, InputError, check_int, memory_budget
 from .params import FeaturesParams, section_or_default
 
 #: the ``homography.features`` defaults: the one declaration of :func:`detect`'s keyword defaults
@@ -178,10 +178,8 @@ def detect(gray: np.ndarray, detector: str = _FEATURES.detector, max_features: i
         raise ValueError(f"`gray` must be a (H, W) uint8 image, got shape {gray.shape} dtype {gray.dtype}")
     if gray.size == 0:
         raise InputError("`gray` is empty (0 pixels)")
-    if not isinstance(max_features, (int, np.integer)) or max_features <= 0:
-        raise ValueError(f"`max_features` must be a positive integer, got {max_features!r}")
-    if not isinstance(min_long_side, (int, np.integer)) or min_long_side < 0:
-        raise ValueError(f"`min_long_side` must be a non-negative integer, got {min_long_side!r}")
+    check_int("max_features", max_features, 1)
+    check_int("min_long_side", min_long_side, 0)
     scale = min_long_side / max(gray.shape) if max(gray.shape) < min_long_side else 1.0
     fit = detection_scale(gray.shape, detector)  # huge images: detect at a size within the memory budget
     scale = fit if fit < 1.0 else scale

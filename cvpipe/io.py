@@ -19,7 +19,7 @@ from typing import Any, Iterable, Iterator, TypeVar
 import cv2
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, check_int
 
 #: default upper bound on the pixel count of an input image (100 megapixels)
 DEFAULT_MAX_PIXELS = 100_000_000
@@ -142,8 +142,7 @@ def read_image(path: str | os.PathLike, mode: str = "color", max_pixels: int = D
     """
     if mode not in _MODES:
         raise ValueError(f"`mode` must be one of {sorted(_MODES)}, got {mode!r}")
-    if not isinstance(max_pixels, (int, np.integer)) or max_pixels <= 0:
-        raise ValueError(f"`max_pixels` must be a positive integer, got {max_pixels!r}")
+    check_int("max_pixels", max_pixels, 1)
     p = Path(path)
     if not p.exists():
         raise InputError(f"{p}: no such file")
@@ -200,8 +199,7 @@ def read_text(path: str | os.PathLike, what: str = "text", max_bytes: int = DEFA
     InputError
         Missing file, a folder, unreadable, over ``max_bytes``, not UTF-8 or holding NUL bytes.
     """
-    if not isinstance(max_bytes, (int, np.integer)) or max_bytes <= 0:
-        raise ValueError(f"`max_bytes` must be a positive integer, got {max_bytes!r}")
+    check_int("max_bytes", max_bytes, 1)
     p = Path(path)
     if not p.exists():
         raise InputError(f"{p}: no such file")

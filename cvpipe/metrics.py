@@ -8,7 +8,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from .errors import InputError
+from .errors import InputError, check_int
 
 
 def _homography(name: str, H) -> np.ndarray:
@@ -23,9 +23,8 @@ def _homography(name: str, H) -> np.ndarray:
 def image_corners(width: int, height: int) -> np.ndarray:
     """(4, 2) float64 corners of a width x height image in pixel-centre coordinates: (0, 0), (w-1, 0), (w-1, h-1),
     (0, h-1), clockwise from the top-left (x = column, y = row)."""
-    for name, v in (("width", width), ("height", height)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-            raise InputError(f"`{name}` must be an integer >= 1, got {v!r}")
+    check_int("width", width, 1)
+    check_int("height", height, 1)
     w, h = float(width - 1), float(height - 1)
     return np.array([[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]])
 

@@ -154,6 +154,58 @@ class Stage:
                 self.drop(name(pos), res.error)
         flush(max(unread, default=-1) + 1)
 
+    def map_sets(self, sets: Sequence[tuple[str, dict]], fn: Callable, data: Callable[[str, dict], Any],
+                 shared: Any, desc: str) -> Iterator[tuple[str, dict | None, Any]]:
+        """:meth:`map` over a chain of per-set records: run ``fn`` on every set that has not failed in an earlier
+        stage and yield ``(name, failure record or None, fn's value or None)`` for every set, in order.
+
+        ``sets`` are ``(name, record of the earlier step)``; a record without ``ok`` counts as ok. ``data(name,
+        prev)`` reads a set's item (lazily, here). A set that failed earlier is carried (:meth:`step_record`); one
+        whose ``fn`` raised is this stage's failure, already dropped with its reason by :meth:`map`.
+        """
+        todo = [(n, prev) for n, prev in sets if prev.get("ok", True)]
+        results = self.map(fn, (data(n, prev) for n, prev in todo), shared=shared, desc=desc,
+                           names=[n for n, _ in todo])
+        pending = None
+        for name, prev in sets:
+            if not prev.get("ok", True):
+                yield name, self.step_record(prev, name, dict), None
+                continue
+            if pending is None:
+                pending = next(results, None)
+            if pending is not None and pending[0] == name:
+                yield name, None, pending[1]
+                pending = None
+            else:
+                reason = next(d["reason"] for d in reversed(self.dropped) if d["item"] == name)
+                yield name, {"ok": False, "error": reason, "failed_in": self.name}, None
+
+    def step_record(self, prev: dict, name: str, step: Callable[[], dict]) -> dict:
+        """One set's record in a chain of per-set records (each stage writes one per set): the earlier failure
+        carried on, else ``step()``'s record, else (``step`` raised :class:`~cvpipe.errors.EstimationError`) this
+        stage's failure, also dropped (:meth:`drop`) so that the summary line names it.
+
+        Returns
+        -------
+        dict
+            ``{"ok": True, ...}`` or ``{"ok": False, "error", "failed_in"}`` (the stage that failed), so that a
+            report can say which set failed, where and why.
+        """
+        if not prev.get("ok"):
+            return {"ok": False, "error": prev.get("error"), "failed_in": prev.get("failed_in")}
+        try:
+            return step()
+        except EstimationError as exc:
+            self.drop(name, str(exc))
+            return {"ok": False, "error": str(exc), "failed_in": self.name}
+
+    def step_summary(self, records: Sequence[dict], what: str) -> str:
+        """``"2 sets warped ... (1 failed in an earlier stage)"``: the summary phrase of a chain of per-set records
+        (this stage's own failures are in the line's dropped list)."""
+        ok = sum(1 for r in records if r["ok"])
+        earlier = sum(1 for r in records if not r["ok"] and r.get("failed_in") != self.name)
+        return f"{ok} {what}" + (f" ({earlier} failed in an earlier stage)" if earlier else "")
+
     def drop(self, item: str, reason: str) -> None:
         """Record that ``item`` (a file, pair, set or probe name) was not processed, and why."""
         self.dropped.append({"item": str(item), "reason": str(reason)})

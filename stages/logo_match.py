@@ -11,42 +11,8 @@ from pathlib import Path
 from cvpipe import datasets, io, logo
 from cvpipe.errors import CvpipeError, InputError
 from cvpipe.features import DETECTORS, Features
-from cvpipe.params import LogoMatchParams
+from cvpipe.logo.cached import feature_reasons, features_of, load_gallery
 from stages._runner import Stage, run
-
-
-def features_of(features: Path, root: Path, image: Path, reasons: dict[str, str]) -> dict | str:
-    """The cached feature arrays of ``image`` (under ``root``), or why there are none."""
-    rel = image.relative_to(root)
-    f = features / rel.with_suffix(".npz")
-    if f.is_file():
-        return io.load_npz(f)
-    return reasons.get(rel.as_posix(), reasons.get(image.name, "no features (logo_features did not process it)"))
-
-
-def feature_reasons(features: Path) -> dict[str, str]:
-    """``item -> reason`` of the features stage's ``dropped.json``, when it wrote one."""
-    f = features / "dropped.json"
-    return {d["item"]: d["reason"] for d in io.load_json(f)} if f.is_file() else {}
-
-
-def load_gallery(inputs: datasets.LogoInputs, root: Path, features: Path,
-                 params: LogoMatchParams) -> tuple[logo.Gallery, list[dict]]:
-    """The gallery indexed from the cached features, every reference file mapped to its brand (the brands in
-    sorted order, a brand's files in the order ``find_logo`` lists them); and the references left out, why."""
-    reasons, dropped, refs = feature_reasons(features), [], []
-    for brand in sorted(inputs.gallery):
-        for image in inputs.gallery[brand]:
-            name = image.relative_to(root).as_posix()
-            got = features_of(features, root, image, reasons)
-            if isinstance(got, str):
-                dropped.append({"item": name, "reason": got})
-                continue
-            w, h = (int(v) for v in got["image_size"])
-            refs.append(logo.Reference(brand, name, Features.from_arrays(got), (w, h)))
-    gallery = logo.build_gallery(refs, params.min_features, params.reference_features)
-    dropped += [{"item": n, "reason": f"fewer than {params.min_features} keypoints"} for n in gallery.dropped]
-    return gallery, dropped
 
 
 def logo_match(st: Stage) -> None:

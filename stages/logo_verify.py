@@ -10,8 +10,8 @@ from pathlib import Path
 from cvpipe import datasets, io, logo
 from cvpipe.errors import CvpipeError, InputError
 from cvpipe.features import DETECTORS, Features
+from cvpipe.logo.cached import load_gallery
 from stages._runner import Stage, run
-from stages.logo_match import load_gallery
 
 
 def logo_verify(st: Stage) -> None:

@@ -6,7 +6,6 @@ from pathlib import Path
 import numpy as np
 
 from cvpipe import io, panorama
-from stages import _panorama as pr
 from stages._runner import Stage, run
 
 
@@ -22,8 +21,7 @@ def panorama_blend(st: Stage) -> None:
                                [io.read_image(d / f"mask_{k}.png", "gray") for k in range(n)],
                                [tuple(c) for c in meta["corners"]], tuple(meta["size"]), tuple(meta["origin"]))
 
-    for name, failed, got in pr.map_sets(st, "panorama_blend", sets, panorama.blend_set, set_data, st.params,
-                                         "panorama blend"):
+    for name, failed, got in st.map_sets(sets, panorama.blend_set, set_data, st.params, "panorama blend"):
         rec = failed
         if failed is None:
             pano, mask, seams, rec, seconds = got
@@ -34,7 +32,7 @@ def panorama_blend(st: Stage) -> None:
         io.save_json(out / f"{name}.json", rec)
         records.append(rec)
     out.mkdir(parents=True, exist_ok=True)
-    st.made(pr.step_summary(records, "panorama_blend", f"panoramas blended into {out}"))
+    st.made(st.step_summary(records, f"panoramas blended into {out}"))
 
 
 if __name__ == "__main__":

@@ -5,7 +5,6 @@ from pathlib import Path
 
 from cvpipe import io, panorama
 from cvpipe.errors import EstimationError
-from stages import _panorama as pr
 from stages._runner import Stage, run
 
 
@@ -24,11 +23,11 @@ def _crop(st: Stage, src: Path, name: str, out: Path) -> dict:
 def panorama_crop(st: Stage) -> None:
     src, out, records = Path(st.args.blend), Path(st.args.out), []
     for f in st.progress(sorted(src.glob("*.json")), "panorama crop"):
-        rec = pr.step_record(io.load_json(f), "panorama_crop", f.stem, lambda: _crop(st, src, f.stem, out), st.drop)
+        rec = st.step_record(io.load_json(f), f.stem, lambda: _crop(st, src, f.stem, out))
         io.save_json(out / f"{f.stem}.json", rec)
         records.append(rec)
     out.mkdir(parents=True, exist_ok=True)
-    st.made(pr.step_summary(records, "panorama_crop", f"cropped panoramas in {out}"))
+    st.made(st.step_summary(records, f"cropped panoramas in {out}"))
 
 
 if __name__ == "__main__":

@@ -5,7 +5,6 @@ recorded there with its reason)."""
 from pathlib import Path
 
 from cvpipe import io, panorama
-from stages import _panorama as pr
 from stages._runner import Stage, run
 
 
@@ -21,8 +20,7 @@ def panorama_homographies(st: Stage) -> None:
                       "full_sizes": arrays["full_sizes"].tolist()}
         return graph, recs[name]["files"]
 
-    for name, failed, got in pr.map_sets(st, "panorama_homographies", [(f.stem, {}) for f in files],
-                                         panorama.register_set, set_data,
+    for name, failed, got in st.map_sets([(f.stem, {}) for f in files], panorama.register_set, set_data,
                                          (p, st.sections["panorama.match"]), "panorama homographies"):
         rec = recs.pop(name)
         if failed is not None:  # recorded, so the later stages and the report say which set failed and why

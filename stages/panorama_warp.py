@@ -4,7 +4,6 @@
 from pathlib import Path
 
 from cvpipe import io, panorama
-from stages import _panorama as pr
 from stages._runner import Stage, run
 
 
@@ -18,8 +17,7 @@ def panorama_warp(st: Stage) -> None:
         return h, [io.read_image(Path(st.args.images) / name / f, "color") if k in used else None
                    for k, f in enumerate(h["files"])]
 
-    for name, failed, got in pr.map_sets(st, "panorama_warp", sets, panorama.warp_set, set_data, st.params,
-                                         "panorama warp"):
+    for name, failed, got in st.map_sets(sets, panorama.warp_set, set_data, st.params, "panorama warp"):
         rec = failed
         if failed is None:
             w, rec, seconds = got
@@ -30,7 +28,7 @@ def panorama_warp(st: Stage) -> None:
         io.save_json(out / name / "warp.json", rec)
         records.append(rec)
     out.mkdir(parents=True, exist_ok=True)
-    st.made(pr.step_summary(records, "panorama_warp", f"sets warped into {out}"))
+    st.made(st.step_summary(records, f"sets warped into {out}"))
 
 
 if __name__ == "__main__":

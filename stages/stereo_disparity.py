@@ -15,16 +15,6 @@ from cvpipe.errors import InputError
 from cvpipe.params import SECTIONS, load_section
 from stages._runner import Stage, run
 
-def read_truth(path: Path, shape: tuple[int, ...]) -> np.ndarray:
-    """The ``disparity`` array of a pair's truth.npz, checked against the left image's size."""
-    arrays = io.load_npz(path)
-    if "disparity" not in arrays:
-        raise InputError(f"{path}: field `disparity` is missing")
-    truth = arrays["disparity"].astype(np.float32)
-    if truth.shape != shape:
-        raise InputError(f"{path}: field `disparity` has shape {truth.shape}, the left image is {shape}")
-    return truth
-
 
 def stereo_disparity(st: Stage) -> None:
     a, method = st.args, st.args.method
@@ -55,8 +45,8 @@ def stereo_disparity(st: Stage) -> None:
         pair = by_name[name]
         st.timings["warmup"] = st.timings.get("warmup", 0.0) + seconds.get("warmup", 0.0)
         st.timings[f"disparity {name}"] = seconds["disparity"]
-        truth = read_truth(pair.truth, disp.shape) if pair.truth is not None and rects[name]["kind"] == "none" \
-            else None
+        in_frame = pair.truth is not None and rects[name]["kind"] == "none"
+        truth = datasets.read_stereo_truth(pair.truth, disp.shape) if in_frame else None
         with io.atomic_path(out / name / "disparity.npy") as tmp:
             with open(tmp, "wb") as fh:
                 np.save(fh, disp.astype(np.float32), allow_pickle=False)

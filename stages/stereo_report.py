@@ -9,7 +9,6 @@ import numpy as np
 
 from cvpipe import datasets, io, stereo
 from stages._runner import REPORT_ARGS, Stage, run
-from stages.stereo_disparity import read_truth
 
 
 def stereo_report(st: Stage) -> None:
@@ -49,7 +48,8 @@ def stereo_report(st: Stage) -> None:
         max_disp = next(r["pairs"][pair.name]["max_disp"] for r in runs.values() if pair.name in r["pairs"])
         disps = {m: (np.load(r["folder"] / pair.name / "disparity.npy", allow_pickle=False)
                      if pair.name in r["pairs"] else None) for m, r in runs.items()}
-        truth = read_truth(pair.truth, left.shape[:2]) if pair.truth is not None and rec["kind"] == "none" else None
+        in_frame = pair.truth is not None and rec["kind"] == "none"
+        truth = datasets.read_stereo_truth(pair.truth, left.shape[:2]) if in_frame else None
         path = out / f"{pair.name}.png"
         io.save_image(path, stereo.comparison_picture(left, disps, max_disp, truth, p.error_clip))
         what = "top: left image and each method's disparity; bottom: true disparity and each method's |error|" \

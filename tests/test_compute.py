@@ -168,7 +168,7 @@ def test_bad_arguments_name_the_parameter():
         check_scheduler("cluster")
     with pytest.raises(InputError, match="`--scheduler` must be"):
         check_scheduler("tcp://", "--scheduler")
-    with pytest.raises(InputError, match="`compute.window` must be a positive integer, got 0"):
+    with pytest.raises(InputError, match="`compute.window` must be an integer >= 1, got 0"):
         map_items(abs, [1], window=0)
     with pytest.raises(InputError, match="`retries` must be an integer >= 0"):
         map_items(abs, [1], retries=-1)

@@ -59,7 +59,7 @@ def test_detect_validation():
         features.detect(np.zeros((10, 10), np.uint8), "surf")
     with pytest.raises(ValueError, match="`gray` must be a"):
         features.detect(np.zeros((10, 10, 3), np.uint8))
-    with pytest.raises(ValueError, match="`max_features` must be a positive integer"):
+    with pytest.raises(ValueError, match="`max_features` must be an integer >= 1"):
         features.detect(np.zeros((10, 10), np.uint8), max_features=0)
     with pytest.raises(InputError, match="empty"):
         features.detect(np.zeros((0, 10), np.uint8))

@@ -351,13 +351,13 @@ def test_bad_edges(edges, message):
     ({"rho": "1"}, r"`rho` must be a number"),
     ({"theta": 0.0}, r"`theta` must be > 0"),
     ({"theta": 4.0}, r"`theta` must be in \(0, pi\]"),
-    ({"threshold": 0}, r"`threshold` must be >= 1, got 0"),
-    ({"threshold": -3}, r"`threshold` must be >= 1"),
+    ({"threshold": 0}, r"`threshold` must be an integer >= 1, got 0"),
+    ({"threshold": -3}, r"`threshold` must be an integer >= 1"),
     ({"threshold": 2.5}, r"`threshold` must be an integer"),
     ({"min_theta": 1.0, "max_theta": 0.5}, r"need 0 <= `min_theta` <= `max_theta` <= pi"),
     ({"max_theta": 4.0}, r"need 0 <= `min_theta` <= `max_theta` <= pi"),
     ({"min_theta": float("inf")}, r"`min_theta` must be a finite number"),
-    ({"max_lines": 0}, r"`max_lines` must be >= 1"),
+    ({"max_lines": 0}, r"`max_lines` must be an integer >= 1"),
 ])
 def test_bad_parameters(kwargs, message):
     edges = np.zeros((10, 10), np.uint8)
@@ -368,8 +368,8 @@ def test_bad_parameters(kwargs, message):
 @pytest.mark.parametrize("kwargs, message", [
     ({"min_line_length": -1}, r"`min_line_length` must be a number >= 0"),
     ({"max_line_gap": float("nan")}, r"`max_line_gap` must be a number >= 0"),
-    ({"threshold": 0}, r"`threshold` must be >= 1"),
-    ({"max_lines": 0}, r"`max_lines` must be >= 1"),
+    ({"threshold": 0}, r"`threshold` must be an integer >= 1"),
+    ({"max_lines": 0}, r"`max_lines` must be an integer >= 1"),
     ({"params": {"rho": 0.5}}, r"`params` must be a HoughLinesParams \(the hough.lines section\), got dict"),
 ])
 def test_bad_probabilistic_parameters(kwargs, message):
@@ -378,7 +378,7 @@ def test_bad_probabilistic_parameters(kwargs, message):
 
 
 def test_bad_opencv_wrapper_and_registry():
-    with pytest.raises(InputError, match=r"`threshold` must be >= 1"):
+    with pytest.raises(InputError, match=r"`threshold` must be an integer >= 1"):
         hough.hough_lines_opencv(np.zeros((10, 10), np.uint8), threshold=0)
     with pytest.raises(InputError, match=r"`impl` must be one of \['opencv', 'ours'\], got 'fast'"):
         hough.get_impl("fast")
@@ -454,7 +454,7 @@ def test_cli_text_output_and_refine(line_photo, capsys):
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--threshold", "0"], "`threshold` must be >= 1"),
+    (["--threshold", "0"], "`threshold` must be an integer >= 1"),
     (["--rho", "-1"], "`rho` must be > 0"),
     (["--theta-deg", "0"], "`--theta-deg` must be > 0"),
     (["--method", "opencv", "--refine"], "`--refine` is only available with --method ours"),

@@ -77,7 +77,7 @@ def test_bad_mode_and_limit(png):
     path, _ = png
     with pytest.raises(ValueError, match="`mode` must be one of"):
         io.read_image(path, "rgb")
-    with pytest.raises(ValueError, match="`max_pixels` must be a positive integer"):
+    with pytest.raises(ValueError, match="`max_pixels` must be an integer >= 1"):
         io.read_image(path, max_pixels=0)
 
 
@@ -111,7 +111,7 @@ def test_read_text_refusals_name_the_file(tmp_path):
     (tmp_path / "latin.txt").write_bytes(b"caf\xe9=1\n")
     with pytest.raises(InputError, match=r"latin\.txt: not a UTF-8 text file \(byte 3 is 0xe9\)"):
         io.read_text(tmp_path / "latin.txt")
-    with pytest.raises(ValueError, match="`max_bytes` must be a positive integer"):
+    with pytest.raises(ValueError, match="`max_bytes` must be an integer >= 1"):
         io.read_text(big, max_bytes=0)
 
 

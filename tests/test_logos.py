@@ -266,7 +266,7 @@ def test_gallery_mixed_detectors(marks):
 
 @pytest.mark.parametrize("kwargs, match", [
     ({"min_features": 3}, "`min_features` must be an integer >= 4"),
-    ({"max_features": 7}, r"`max_features` must be an integer >= `min_features` \(8\)"),
+    ({"max_features": 7}, r"`max_features` must be an integer >= 8 \(`min_features`\), got 7"),
 ])
 def test_gallery_min_features(gallery, kwargs, match):
     with pytest.raises(ValueError, match=match):

@@ -222,7 +222,7 @@ def test_opencv_stitch_with_makes_the_keyword_call(crops, monkeypatch):
 
 # the modules whose section entry points' Examples no other test module runs
 @pytest.mark.parametrize("name", ["cvpipe.features", "cvpipe.panorama.match", "cvpipe.panorama.opencv_baseline",
-                                  "cvpipe.samples", "cvpipe.stereo.opencv_baseline"])
+                                  "cvpipe.samples", "cvpipe.stereo.methods"])
 def test_entry_point_examples_run(name):
     import doctest
     import importlib

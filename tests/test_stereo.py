@@ -177,12 +177,13 @@ def test_pair_validation():
     with pytest.raises(ValueError, match="`left` must be a numpy array"):
         stereo.disparity_sgm([[0]], g, 16)
     for bad in (0, -3, 60, 61):
-        with pytest.raises(ValueError, match=rf"`max_disp` must be in \[1, 59\].*got {bad}"):
+        with pytest.raises(ValueError, match=rf"`max_disp` must be an integer in \[1, 59\].*got {bad}"):
             stereo.disparity_sgm(g, g, bad)
-    with pytest.raises(ValueError, match="`max_disp` must be an integer, got 16.0"):
+    with pytest.raises(ValueError, match=r"`max_disp` must be an integer in \[1, 59\] \(positive and less than the "
+                                         r"image width\), got 16.0"):
         stereo.disparity_sgm(g, g, 16.0)
     for fn in (stereo.disparity_opencv_bm, stereo.disparity_opencv_sgbm):
-        with pytest.raises(ValueError, match="`max_disp` must be in"):
+        with pytest.raises(ValueError, match="`max_disp` must be an integer in"):
             fn(g, g, 0)
         with pytest.raises(ValueError, match=r"rounded up to a multiple of 16 \(64\) must be less than the width"):
             fn(g, g, 50)
@@ -288,7 +289,7 @@ def test_cli_errors(tmp_path, capsys):
     assert cli.main(["stereo", str(gp), str(cp), "--max-disp", "16", "-o", str(tmp_path / "d.npy")]) == 2
     assert "must both be grayscale or both BGR" in capsys.readouterr().err
     assert cli.main(["stereo", str(gp), str(gp), "--max-disp", "60", "-o", str(tmp_path / "d.npy")]) == 2
-    assert "`max_disp` must be in [1, 59]" in capsys.readouterr().err
+    assert "`max_disp` must be an integer in [1, 59]" in capsys.readouterr().err
     assert cli.main(["stereo", str(gp), str(gp), "--max-disp", "16", "-o", str(tmp_path / "d.txt")]) == 2
     assert "`-o` must end in one of .npy, .png" in capsys.readouterr().err
     assert not (tmp_path / "d.npy").exists()

@@ -59,42 +59,6 @@ def gallery_references(folder: str | Path, detector: str, max_features: int) -> 
     return refs
 
 
-def load_gallery(folder: str | Path, detector: str, max_features: int, params: LogoMatchParams) -> logo.Gallery:
-    """Read, detect and index a gallery folder (see :func:`gallery_files`)."""
-    from .. import logo
-
-    refs = gallery_references(folder, detector, max_features)
-    return logo.build_gallery(refs, params.min_features, params.reference_features)
-
-
-class SharedGallery:
-    """The gallery's references, indexed where they land (once per worker).
-
-    The trained matcher inside :class:`cvpipe.logo.Gallery` is an OpenCV object that cannot be pickled, so the
-    references travel and the index is rebuilt on first use; the rebuild is deterministic, so every worker matches
-    exactly as this process does.
-    """
-
-    def __init__(self, references: list, params: LogoMatchParams):
-        self.references, self.params, self._gallery = list(references), params, None
-
-    def __getstate__(self) -> dict:
-        return {"references": self.references, "params": self.params}
-
-    def __setstate__(self, state: dict) -> None:
-        self.__init__(state["references"], state["params"])
-
-    @property
-    def gallery(self) -> logo.Gallery:
-        """The indexed gallery (built on first access)."""
-        if self._gallery is None:
-            from .. import logo
-
-            p = self.params
-            self._gallery = logo.build_gallery(self.references, p.min_features, p.reference_features)
-        return self._gallery
-
-
 def recognize_scene(item: tuple, shared: tuple) -> tuple[dict, list, list]:
     """Recognise one scene, an item of :func:`cvpipe.compute.map_items` (runs on a worker).
 
@@ -103,7 +67,8 @@ def recognize_scene(item: tuple, shared: tuple) -> tuple[dict, list, list]:
     item : tuple
         ``(scene name, gray image or None, read error or None)`` from :func:`cvpipe.commands.read_images`.
     shared : tuple
-        ``(SharedGallery, method, max_features, min_long_side, LogoMatchParams, LogoVerifyParams, seed)``.
+        ``(Gallery, method, max_features, min_long_side, LogoMatchParams, LogoVerifyParams, seed)``; the gallery
+        travels to a worker as its references and is indexed again there (:class:`cvpipe.logo.Gallery`).
 
     Returns
     -------
@@ -119,7 +84,7 @@ def recognize_scene(item: tuple, shared: tuple) -> tuple[dict, list, list]:
     if error is not None:
         raise error
     g, method, max_features, min_long_side, mp, vp, seed = shared
-    det = logo.recognize(g.gallery, detect(gray, method, max_features, min_long_side=min_long_side),
+    det = logo.recognize(g, detect(gray, method, max_features, min_long_side=min_long_side),
                           (gray.shape[1], gray.shape[0]), mp, vp, seed)
     found = logo.every_logo(det, vp.score_threshold)
     return (detection_json(scene, det, found), [h.quad for h in found],
@@ -171,15 +136,16 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(str(exc).replace("`ratio`", "`--ratio`")) from exc
     if args.min_long_side < 0:
         raise InputError(f"`--min-long-side` must be a non-negative number of pixels, got {args.min_long_side}")
-    from .. import homography
+    from .. import homography, logo
 
     scheduler = check_scheduler(args.scheduler, "--scheduler")
     pictures = overlay_paths(args.scenes, args.overlay, SUFFIX)
     io.check_distinct_outputs([("`--overlay`", p) for p in pictures],
                               [(f"SCENE {k + 1}", path) for k, path in enumerate(args.scenes)])
     with step(f"gallery ({args.method})"):
-        g = SharedGallery(gallery_references(args.gallery, args.method, args.max_features), mp)
-        g.gallery  # noqa: B018 - index here too, so that a gallery error is one line before any scene runs
+        # indexed before any scene runs, so that a gallery error is one line of its own
+        g = logo.build_gallery(gallery_references(args.gallery, args.method, args.max_features), mp.min_features,
+                               mp.reference_features)
     records, failed = [], 0
     shared = (g, args.method, args.max_features, args.min_long_side, mp, vp, args.seed)
     # the note once a scene was read: gallery and scene errors come first, without it

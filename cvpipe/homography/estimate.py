@@ -10,7 +10,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..errors import EstimationError, InputError
+from ..errors import EstimationError, InputError, check_int
 from ..geometry import as_points
 from ..params import HomographyEstimateParams, section_or_default
 from ._kernels import _bounding_box, _chance_hits, _distinct_rows, _finalize, _normalize, _sq_errors
@@ -292,12 +292,10 @@ def find_homography(
         raise InputError(f"`threshold` must be a finite number > 0 pixels, got {threshold!r}")
     if not (isinstance(confidence, (int, float, np.floating)) and 0.0 < confidence < 1.0):
         raise InputError(f"`confidence` must be in (0, 1), got {confidence!r}")
-    if isinstance(max_iters, bool) or not isinstance(max_iters, (int, np.integer)) or max_iters < 1:
-        raise InputError(f"`max_iters` must be an integer >= 1, got {max_iters!r}")
+    check_int("max_iters", max_iters, 1)
     if not (isinstance(lo_multiplier, (int, float)) and lo_multiplier >= 1.0):
         raise InputError(f"`lo_multiplier` must be >= 1, got {lo_multiplier!r}")
-    if isinstance(lo_steps, bool) or not isinstance(lo_steps, (int, np.integer)) or lo_steps < 1:
-        raise InputError(f"`lo_steps` must be an integer >= 1, got {lo_steps!r}")
+    check_int("lo_steps", lo_steps, 1)
     gen = np.random.default_rng(rng)
     n = len(s)
     thr2 = float(threshold) ** 2

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, check_int
 from ..metrics import not_processed_table
 from ..params import HomographyReportParams
 
@@ -47,8 +47,7 @@ def alignment_checkerboard(img_a: np.ndarray, img_b: np.ndarray, H_ab, tiles: in
     H = np.asarray(H_ab, dtype=np.float64)
     if H.shape != (3, 3) or not np.isfinite(H).all():
         raise InputError(f"`H_ab` must be a finite (3, 3) array, got shape {H.shape}")
-    if isinstance(tiles, bool) or not isinstance(tiles, (int, np.integer)) or tiles < 1:
-        raise InputError(f"`tiles` must be an integer >= 1, got {tiles!r}")
+    check_int("tiles", tiles, 1)
     a = img_a if img_a.ndim == 3 else cv2.cvtColor(img_a, cv2.COLOR_GRAY2BGR)
     b = img_b if img_b.ndim == 3 else cv2.cvtColor(img_b, cv2.COLOR_GRAY2BGR)
     h, w = a.shape[:2]

@@ -10,9 +10,9 @@ import math
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, check_int
 from ..params import HoughLinesParams
-from .transform import _check_edges, _check_int, hough_grid, hough_steps
+from .transform import _check_edges, hough_grid, hough_steps
 
 __all__ = ["hough_lines_probabilistic"]
 
@@ -62,8 +62,8 @@ def hough_lines_probabilistic(
     [[0, 20, 79, 20]]
     """
     edges = _check_edges(edges)
-    threshold = _check_int("threshold", threshold, 1)
-    max_lines = _check_int("max_lines", max_lines, 1)
+    threshold = check_int("threshold", threshold, 1)
+    max_lines = check_int("max_lines", max_lines, 1)
     for name, value in (("min_line_length", min_line_length), ("max_line_gap", max_line_gap)):
         if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
                 or not math.isfinite(float(value)) or value < 0:

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..errors import InputError, check_memory
+from ..errors import InputError, check_int, check_memory
 from ..params import HoughLinesParams, section_or_default
 
 __all__ = ["HoughGrid", "hough_grid", "hough_accumulator", "hough_lines", "hough_lines_opencv", "IMPLEMENTATIONS",
@@ -68,14 +68,6 @@ def _check_positive(name: str, value: float) -> float:
     if not math.isfinite(float(value)) or value <= 0:
         raise InputError(f"`{name}` must be > 0, got {value}")
     return float(value)
-
-
-def _check_int(name: str, value: int, lo: int) -> int:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise InputError(f"`{name}` must be an integer, got {value!r}")
-    if value < lo:
-        raise InputError(f"`{name}` must be >= {lo}, got {value}")
-    return int(value)
 
 
 # ------------------------------------------------------------------------------------------------- geometry
@@ -310,9 +302,9 @@ def hough_lines(
     [[20.0, 1.5707963705062866, 80.0]]
     """
     edges = _check_edges(edges)
-    threshold = _check_int("threshold", threshold, 1)
+    threshold = check_int("threshold", threshold, 1)
     if max_lines is not None:
-        max_lines = _check_int("max_lines", max_lines, 1)
+        max_lines = check_int("max_lines", max_lines, 1)
     grid = hough_grid(edges.shape, rho, theta, min_theta, max_theta)
     acc = hough_accumulator(edges, grid, parallel)
     from . import _kernels
@@ -351,7 +343,7 @@ def hough_lines_opencv(
     True
     """
     edges = _check_edges(edges)
-    threshold = _check_int("threshold", threshold, 1)
+    threshold = check_int("threshold", threshold, 1)
     hough_grid(edges.shape, rho, theta, min_theta, max_theta)  # same validation as ours
     lines = cv2.HoughLinesWithAccumulator(edges, float(rho), float(theta), threshold,
                                           min_theta=float(min_theta), max_theta=float(max_theta))

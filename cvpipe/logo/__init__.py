@@ -22,9 +22,10 @@ Unlike a raw inlier count, it does not grow with the number of tentative matches
 feature-rich reference produces, so it is comparable across brands and separates true logos from the 6-10 inlier
 fits that RANSAC finds on any busy photo.
 
-The package takes arrays only; reading the gallery folder lives in the command, stage and benchmark code. Its steps:
-``gallery`` (the index), ``match`` (tentative matches), ``verify`` (model, plausibility, score), ``detect`` (the
-recipe: :func:`recognize`, :func:`every_logo`) and ``report`` (evaluation, stage records, pictures).
+The steps take arrays: ``gallery`` (the index), ``match`` (tentative matches), ``verify`` (model, plausibility,
+score), ``detect`` (the recipe: :func:`recognize`, :func:`every_logo`) and ``report`` (evaluation, stage records,
+pictures). :mod:`~cvpipe.logo.cached` reads the gallery and the scenes' features back from the features stage's
+folder for the stages; the command and the benchmark read their own image folders.
 """
 
 from .detect import DEFAULT_EXTRA_SCORE, MAX_OVERLAP, Detection, decide, every_logo, quad_iou, recognize, verify_scene

@@ -8,7 +8,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, check_int
 from ..features import DETECTORS, Features, check_detector
 from ..geometry import image_corners
 from ..matching import flann_matcher
@@ -142,12 +142,12 @@ def build_gallery(references: Sequence[Reference], min_features: int = _MATCH.mi
     Raises
     ------
     InputError
-        Empty gallery, or no reference with at least ``min_features`` keypoints (the message names the files).
+        Empty gallery, no reference with at least ``min_features`` keypoints (the message names the files), or a
+        bad ``min_features`` / ``max_features``.
     ValueError
-        Mixed detectors or a bad ``min_features`` / ``max_features``.
+        Mixed detectors.
     """
-    if not isinstance(min_features, (int, np.integer)) or min_features < 4:
-        raise ValueError(f"`min_features` must be an integer >= 4, got {min_features!r}")
+    check_int("min_features", min_features, 4)
     refs = list(references)
     if not refs:
         raise InputError("the gallery is empty: expected DIR/<brand>.<ext> or DIR/<brand>/*.<ext> images")
@@ -165,9 +165,7 @@ def build_gallery(references: Sequence[Reference], min_features: int = _MATCH.mi
                 raise ValueError(f"`box` of reference {r.name} must lie inside its {r.size[0]}x{r.size[1]} image "
                                  f"with x1 < x2 and y1 < y2, got {r.box}")
     if max_features is not None:
-        if not isinstance(max_features, (int, np.integer)) or max_features < min_features:
-            raise ValueError(f"`max_features` must be an integer >= `min_features` ({min_features}), got "
-                             f"{max_features!r}")
+        check_int("max_features", max_features, min_features, note="`min_features`")
         refs = [r if len(r.features) <= max_features else
                 Reference(r.brand, r.name, _strongest(r.features, int(max_features)), r.size, r.box) for r in refs]
     usable = [r for r in refs if len(r.features) >= min_features]

@@ -16,6 +16,7 @@ from typing import Callable
 import cv2
 import numpy as np
 
+from ..errors import check_int
 from .seams import _distance, seam_labels, seam_lines
 from .warp import Warped
 
@@ -225,8 +226,7 @@ def compensation_gains(w: Warped, mode: str = DEFAULT_GAIN, block: int = DEFAULT
     """
     if mode not in GAIN_CHOICES:
         raise ValueError(f"`gain_compensation` must be one of {list(GAIN_CHOICES)}, got {mode!r}")
-    if not isinstance(block, (int, np.integer)) or block < 4:
-        raise ValueError(f"`gain_block` must be an integer >= 4, got {block!r}")
+    check_int("gain_block", block, 4)
     if mode == "none":
         return None
     if mode == "gain":
@@ -278,8 +278,7 @@ def blend_multiband(w: Warped, labels: np.ndarray, bands: int, gains=None) -> np
     (H, W, 3) uint8
         The blended canvas, 0 where no image covers it.
     """
-    if not isinstance(bands, (int, np.integer)) or not 1 <= bands <= 12:
-        raise ValueError(f"`bands` must be an integer in [1, 12], got {bands!r}")
+    check_int("bands", bands, 1, 12)
     W, H = w.size
     g = np.ones(len(w.images)) if gains is None else gains
     P = 1 << bands

@@ -8,8 +8,10 @@
 - :mod:`~cvpipe.stereo.pipeline`: the per-pair rectify step of the pipeline (``rectify_pair``);
 - :mod:`~cvpipe.stereo.sgm`: our semi-global matching (``disparity_sgm``, ``fill_invalid``, ``textureless``), whose
   numba kernels are in :mod:`~cvpipe.stereo._kernels`;
-- :mod:`~cvpipe.stereo.opencv_baseline`: OpenCV's block matching and SGBM, and the method registry
-  (``METHODS``, ``compute_disparity``; ``disparity_with`` with the ``stereo.<method>`` section, ``METHOD_SECTIONS``);
+- :mod:`~cvpipe.stereo.opencv_baseline`: OpenCV's block matching and SGBM (``disparity_opencv_bm``,
+  ``disparity_opencv_sgbm``);
+- :mod:`~cvpipe.stereo.methods`: the registry of the disparity methods, ours and OpenCV's (``METHODS``,
+  ``compute_disparity``; ``disparity_with`` with the ``stereo.<method>`` section, ``METHOD_SECTIONS``);
 - :mod:`~cvpipe.stereo.depth`: depth from disparity, the point cloud and its PLY bytes, colour-mapped pictures;
 - :mod:`~cvpipe.stereo.report`: accuracy against the truth, the stages' metrics, pictures and report summary.
 
@@ -31,8 +33,8 @@ from .calibration import Calibration, parse_calibration, parse_middlebury_calib,
 from .depth import colorize, depth_from_disparity, parse_ply, ply_bytes, point_cloud
 from .epipolar import (FundamentalFit, eight_point, epipoles, find_fundamental, sampson_distance,
                        sampson_least_squares, seven_point)
-from .opencv_baseline import (METHOD_SECTIONS, METHODS, SGBM_MODES, compute_disparity, disparity_opencv_bm,
-                              disparity_opencv_sgbm, disparity_with)
+from .methods import METHOD_SECTIONS, METHODS, compute_disparity, disparity_with
+from .opencv_baseline import SGBM_MODES, disparity_opencv_bm, disparity_opencv_sgbm
 from .pipeline import KINDS, RectifiedPair, disparity_item, feature_matches, rectify_item, rectify_pair
 from .rectify import (DepthGeometry, Rectification, distortion, looks_rectified, max_disp_from_matches,
                       opencv_uncalibrated, rectified_depth_geometry, rectify_calibrated, rectify_uncalibrated,

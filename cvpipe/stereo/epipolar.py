@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import EstimationError, InputError
+from ..errors import EstimationError, InputError, check_int
 from ..geometry import as_points, collinear, hartley_normalization
 from ..params import StereoRectifyParams
 
@@ -209,8 +209,7 @@ def sampson_least_squares(pts1, pts2, rounds: int = _REFINE_ROUNDS) -> np.ndarra
     ``pts1``, ``pts2``, the result and the errors are those of :func:`eight_point` (the points must hold no
     outliers); ``rounds`` (>= 0, else InputError) is the number of reweighting rounds.
     """
-    if isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 0:
-        raise InputError(f"`rounds` must be an integer >= 0, got {rounds!r}")
+    check_int("rounds", rounds, 0)
     p1, p2 = _check_pair(pts1, pts2, 8)
     T1, T2 = hartley_normalization(p1), hartley_normalization(p2)
     return _refit(_apply(T1, p1), _apply(T2, p2), p1, p2, T1, T2, np.ones(len(p1), bool), int(rounds))
@@ -446,10 +445,8 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
         raise InputError(f"`threshold` must be a finite number > 0 pixels, got {threshold!r}")
     if not (isinstance(confidence, (int, float)) and 0.0 < confidence < 1.0):
         raise InputError(f"`confidence` must be in (0, 1), got {confidence!r}")
-    if isinstance(max_iters, bool) or not isinstance(max_iters, (int, np.integer)) or max_iters < 1:
-        raise InputError(f"`max_iters` must be an integer >= 1, got {max_iters!r}")
-    if isinstance(min_inliers, bool) or not isinstance(min_inliers, (int, np.integer)) or min_inliers < 8:
-        raise InputError(f"`min_inliers` must be an integer >= 8, got {min_inliers!r}")
+    check_int("max_iters", max_iters, 1)
+    check_int("min_inliers", min_inliers, 8)
     p1, p2 = _check_pair(pts1, pts2, 8)
     gen = np.random.default_rng(rng)
     n = len(p1)

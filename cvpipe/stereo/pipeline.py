@@ -207,7 +207,7 @@ def disparity_item(item: tuple, shared: tuple) -> tuple[np.ndarray, dict[str, fl
         ``(left, right, max_disp)``: the rectified images and the pair's disparity range.
     shared : tuple
         ``(method, section)``: a key of :data:`cvpipe.stereo.METHODS` and its ``stereo.<method>`` section
-        (:func:`~cvpipe.stereo.opencv_baseline.disparity_with`).
+        (:func:`~cvpipe.stereo.methods.disparity_with`).
 
     Returns
     -------
@@ -223,7 +223,7 @@ def disparity_item(item: tuple, shared: tuple) -> tuple[np.ndarray, dict[str, fl
     """
     import time
 
-    from .opencv_baseline import disparity_with
+    from .methods import disparity_with
 
     left, right, max_disp = item
     method, params = shared

@@ -19,7 +19,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from ..errors import check_memory
+from ..errors import check_int, check_memory
 from ..params import StereoSgmParams
 
 #: most bits a census signature can hold (uint64)
@@ -52,12 +52,7 @@ def _check_pair(left: np.ndarray, right: np.ndarray, max_disp: int) -> None:
             f"`left` and `right` must have the same size, got {left.shape[1]}x{left.shape[0]} and "
             f"{right.shape[1]}x{right.shape[0]}"
         )
-    if isinstance(max_disp, (bool, np.bool_)) or not isinstance(max_disp, (int, np.integer)):
-        raise ValueError(f"`max_disp` must be an integer, got {max_disp!r}")
-    width = left.shape[1]
-    if max_disp <= 0 or max_disp >= width:
-        raise ValueError(f"`max_disp` must be in [1, {width - 1}] (positive and less than the image width), "
-                         f"got {max_disp}")
+    check_int("max_disp", max_disp, 1, left.shape[1] - 1, note="positive and less than the image width")
 
 
 def _gray(img: np.ndarray) -> np.ndarray:
