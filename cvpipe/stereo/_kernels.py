@@ -543,12 +543,15 @@ def _rank2(F):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def eight_point_solve(x1n, x2n, mask, w, Fn):  # pragma: no cover - compiled
+def eight_point_solve(x1n, x2n, mask, w, Fn, V, warm):  # pragma: no cover - compiled
     """Weighted normalized 8-point on the correspondences in ``mask``: ``Fn`` becomes the rank-2 projection of the
     null vector of ``A^T A``, A the rows of ``x2^T F x1`` times ``w``. Returns a status (``FM_*``).
 
     ``A^T A = sum_i w_i^2 (x2 x2^T) kron (x1 x1^T)``: the 6 distinct products of x2 times the 6 of x1, 36 sums per
-    point instead of the 45 of the symmetric 9x9 outer product.
+    point instead of the 45 of the symmetric 9x9 outer product (no branch on the mask: a weight of 0 instead). Its
+    eigenvectors go to the columns of ``V`` (9, 9); with ``warm``, ``V`` holds those of a similar system (the
+    previous round of a reweighting loop) and the Jacobi rotations start from ``V^T (A^T A) V``, which is nearly
+    diagonal: half the sweeps, the same decomposition up to rounding.
     """
     cnt = 0
     s00 = s01 = s02 = s03 = s04 = s05 = 0.0
@@ -558,15 +561,13 @@ def eight_point_solve(x1n, x2n, mask, w, Fn):  # pragma: no cover - compiled
     s40 = s41 = s42 = s43 = s44 = s45 = 0.0
     s50 = s51 = s52 = s53 = s54 = s55 = 0.0
     for i in range(x1n.shape[0]):
-        if not mask[i]:
-            continue
-        cnt += 1
+        cnt += mask[i]
         x = x1n[i, 0]
         y = x1n[i, 1]
         u = x2n[i, 0]
         v = x2n[i, 1]
         # x2 side (weighted): uu, uv, u, vv, v, 1; x1 side: xx, xy, x, yy, y, 1
-        q5 = w[i] * w[i]
+        q5 = w[i] * w[i] if mask[i] else 0.0
         q2 = q5 * u
         q4 = q5 * v
         q0 = q2 * u
@@ -597,8 +598,32 @@ def eight_point_solve(x1n, x2n, mask, w, Fn):  # pragma: no cover - compiled
             for c in range(3):
                 for d in range(3):
                     M[3 * a + b, 3 * c + d] = S[_SYM6[a, c], _SYM6[b, d]]
-    V = np.empty((9, 9))
-    ev = _jacobi_eigh(M, V)
+    if warm:
+        tmp = np.empty((9, 9))
+        for i in range(9):
+            for j in range(9):
+                t = 0.0
+                for k in range(9):
+                    t += M[i, k] * V[k, j]
+                tmp[i, j] = t
+        for i in range(9):
+            for j in range(i, 9):
+                t = 0.0
+                for k in range(9):
+                    t += V[k, i] * tmp[k, j]
+                M[i, j] = t
+                M[j, i] = t
+        W = np.empty((9, 9))
+        ev = _jacobi_eigh(M, W)
+        for i in range(9):
+            for j in range(9):
+                t = 0.0
+                for k in range(9):
+                    t += V[i, k] * W[k, j]
+                tmp[i, j] = t
+        V[:, :] = tmp
+    else:
+        ev = _jacobi_eigh(M, V)
     if ev[1] <= 1e-24 * max(ev[8], 1e-300):
         return FM_RANK_DEFICIENT
     for k in range(9):
@@ -933,15 +958,16 @@ def noise_cutoff(d, threshold, buf):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def refit(x1n, x2n, p1, p2, T1, T2, mask, rounds, w, F):  # pragma: no cover - compiled
+def refit(x1n, x2n, p1, p2, T1, T2, mask, rounds, w, F, V, warm):  # pragma: no cover - compiled
     """Sampson-reweighted normalized 8-point on ``mask`` (``rounds`` reweightings; ``w``: scratch of len(p1)): F
-    in pixel coordinates, unit norm. Returns a status (``FM_*``)."""
+    in pixel coordinates, unit norm. ``V``, ``warm``: the eigenvectors of the 8-point solves
+    (:func:`eight_point_solve`). Returns a status (``FM_*``)."""
     Fn = np.empty((3, 3))
     tmp = np.empty((3, 3))
     n = p1.shape[0]
     for i in range(n):
         w[i] = 1.0
-    status = eight_point_solve(x1n, x2n, mask, w, Fn)
+    status = eight_point_solve(x1n, x2n, mask, w, Fn, V, warm)
     if status != FM_OK:
         return status
     for _ in range(rounds):
@@ -959,7 +985,7 @@ def refit(x1n, x2n, p1, p2, T1, T2, mask, rounds, w, F):  # pragma: no cover - c
         mean = total / cnt
         for i in range(n):
             w[i] /= mean
-        status = eight_point_solve(x1n, x2n, mask, w, Fn)
+        status = eight_point_solve(x1n, x2n, mask, w, Fn, V, True)
         if status != FM_OK:
             return status
     denormalize(Fn, T1, T2, tmp, F)
@@ -968,10 +994,11 @@ def refit(x1n, x2n, p1, p2, T1, T2, mask, rounds, w, F):  # pragma: no cover - c
 
 
 @njit(cache=True, error_model="numpy")
-def refit_robust(x1n, x2n, p1, p2, T1, T2, F, threshold, rounds, d, den, w, use, buf):  # pragma: no cover
+def refit_robust(x1n, x2n, p1, p2, T1, T2, F, threshold, rounds, d, den, w, use, buf, V, warm):  # pragma: no cover
     """Iteratively reweighted 8-point of F (in place) over every correspondence, weights ``Tukey(d / c) / sqrt(den)``
     with the cut-off c of :func:`noise_cutoff` re-estimated each round; stops early when fewer than 8 fall within
-    it. ``d, den, w, use, buf``: scratch of len(p1). Returns a status (``FM_*``)."""
+    it. ``d, den, w, use, buf``: scratch of len(p1); ``V``, ``warm``: as for :func:`refit`. Returns a status
+    (``FM_*``)."""
     Fn = np.empty((3, 3))
     tmp = np.empty((3, 3))
     n = p1.shape[0]
@@ -998,9 +1025,10 @@ def refit_robust(x1n, x2n, p1, p2, T1, T2, F, threshold, rounds, d, den, w, use,
         mean = total / cnt
         for i in range(n):
             w[i] /= mean
-        status = eight_point_solve(x1n, x2n, use, w, Fn)
+        status = eight_point_solve(x1n, x2n, use, w, Fn, V, warm)
         if status != FM_OK:
             return status
+        warm = True
         denormalize(Fn, T1, T2, tmp, F)
         unit(F)
     return FM_OK
@@ -1014,19 +1042,21 @@ def local_optimize(x1n, x2n, p1, p2, T1, T2, F0, thr2, F):  # pragma: no cover -
     mask = np.empty(n, np.bool_)
     if count_within(F0, p1, p2, thr2, mask) < 8:
         return False, np.inf
-    if refit(x1n, x2n, p1, p2, T1, T2, mask, 0, np.empty(n), F) != FM_OK:
+    if refit(x1n, x2n, p1, p2, T1, T2, mask, 0, np.empty(n), F, np.empty((9, 9)), False) != FM_OK:
         return False, np.inf
     return True, msac_cost(F, p1, p2, thr2, np.inf)
 
 
 @njit(cache=True, error_model="numpy")
-def _finish(x1n, x2n, p1, p2, T1, T2, F, threshold, min_inliers, d, den, w, use, buf, mask, new):  # pragma: no cover
+def _finish(x1n, x2n, p1, p2, T1, T2, F, threshold, min_inliers, d, den, w, use, buf, mask, new, V):  # pragma: no cover
     """The final refinement of one model (F in place): reweighted 8-point refits with inlier re-selection, then the
     robust refit. Returns a status (``FM_*``)."""
     thr2 = threshold * threshold
     count_within(F, p1, p2, thr2, mask)
+    warm = False
     for _ in range(2):  # refit, re-select inliers, refit (the inlier set settles in one or two rounds)
-        status = refit(x1n, x2n, p1, p2, T1, T2, mask, _REFINE_ROUNDS, w, F)
+        status = refit(x1n, x2n, p1, p2, T1, T2, mask, _REFINE_ROUNDS, w, F, V, warm)
+        warm = True
         if status != FM_OK:
             return status
         cnt = count_within(F, p1, p2, thr2, new)
@@ -1039,7 +1069,7 @@ def _finish(x1n, x2n, p1, p2, T1, T2, F, threshold, min_inliers, d, den, w, use,
             break
         mask[:] = new
     if _FINAL_WSCALE > 0:
-        return refit_robust(x1n, x2n, p1, p2, T1, T2, F, threshold, _REFINE_ROUNDS, d, den, w, use, buf)
+        return refit_robust(x1n, x2n, p1, p2, T1, T2, F, threshold, _REFINE_ROUNDS, d, den, w, use, buf, V, True)
     return FM_OK
 
 
@@ -1057,12 +1087,14 @@ def final_refinement(x1n, x2n, p1, p2, T1, T2, starts, threshold, sel2, min_inli
     use = np.empty(n, np.bool_)
     mask = np.empty(n, np.bool_)
     new = np.empty(n, np.bool_)
+    V = np.empty((9, 9))
     s = starts.shape[0]
     quick = np.empty((s, 3, 3))
     qcost = np.full(s, np.inf)
     for k in range(s):
         quick[k] = starts[k]
-        if refit_robust(x1n, x2n, p1, p2, T1, T2, quick[k], threshold, quick_rounds, d, den, w, use, buf) == FM_OK:
+        if refit_robust(x1n, x2n, p1, p2, T1, T2, quick[k], threshold, quick_rounds, d, den, w, use, buf, V,
+                        False) == FM_OK:
             qcost[k] = msac_cost(quick[k], p1, p2, sel2, np.inf)
     order = np.argsort(qcost, kind="mergesort")
     cand = np.empty((3, 3))
@@ -1073,7 +1105,8 @@ def final_refinement(x1n, x2n, p1, p2, T1, T2, starts, threshold, sel2, min_inli
         if not qcost[k] < np.inf:
             break
         cand[:, :] = quick[k]
-        if _finish(x1n, x2n, p1, p2, T1, T2, cand, threshold, min_inliers, d, den, w, use, buf, mask, new) != FM_OK:
+        if _finish(x1n, x2n, p1, p2, T1, T2, cand, threshold, min_inliers, d, den, w, use, buf, mask, new,
+                   V) != FM_OK:
             continue
         c = msac_cost(cand, p1, p2, sel2, np.inf)
         if c < best:

@@ -141,7 +141,8 @@ def _eight_point_normalized(x1n: np.ndarray, x2n: np.ndarray, w: np.ndarray | No
     # the null vector of A from the 9x9 normal matrix (Hartley normalization keeps it well conditioned): an
     # eigen-decomposition of 9x9 instead of an SVD of N x 9
     Fn = np.empty((3, 3))
-    status = K.eight_point_solve(x1n, x2n, np.ones(len(x1n), np.bool_), np.ones(len(x1n)) if w is None else w, Fn)
+    status = K.eight_point_solve(x1n, x2n, np.ones(len(x1n), np.bool_), np.ones(len(x1n)) if w is None else w, Fn,
+                                 np.empty((9, 9)), False)
     if status != K.FM_OK:
         raise EstimationError(_SOLVE_ERRORS[status])
     return Fn
@@ -197,7 +198,7 @@ def sampson_least_squares(pts1, pts2, rounds: int = _REFINE_ROUNDS) -> np.ndarra
     T1, T2 = hartley_normalization(p1), hartley_normalization(p2)
     F = np.empty((3, 3))
     status = K.refit(_apply(T1, p1), _apply(T2, p2), p1, p2, T1, T2, np.ones(len(p1), np.bool_), int(rounds),
-                     np.empty(len(p1)), F)
+                     np.empty(len(p1)), F, np.empty((9, 9)), False)
     if status != K.FM_OK:
         raise EstimationError(_SOLVE_ERRORS[status])
     return F
