@@ -1114,6 +1114,15 @@ def _finish(x1n, x2n, p1, p2, T1, T2, F, threshold, min_inliers, d, den, w, use,
 
 
 @njit(cache=True, error_model="numpy")
+def _same(A, B):  # pragma: no cover - compiled
+    for i in range(3):
+        for j in range(3):
+            if A[i, j] != B[i, j]:
+                return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
 def final_refinement(x1n, x2n, p1, p2, T1, T2, starts, threshold, sel2, min_inliers, quick_rounds, full,
                      F):  # pragma: no cover - compiled
     """The multi-start final refinement: each start gets ``quick_rounds`` robust rounds, the ``full`` lowest of
@@ -1144,6 +1153,8 @@ def final_refinement(x1n, x2n, p1, p2, T1, T2, starts, threshold, sel2, min_inli
         k = order[t]
         if not qcost[k] < np.inf:
             break
+        if t > 0 and _same(quick[k], quick[order[t - 1]]):
+            continue  # the same start as the previous one (a model that is both a so-far-best and in the pool)
         cand[:, :] = quick[k]
         if _finish(x1n, x2n, p1, p2, T1, T2, cand, threshold, min_inliers, d, den, w, use, buf, mask, new,
                    V) != FM_OK:
