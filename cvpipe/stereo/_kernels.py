@@ -657,11 +657,12 @@ def _smallest_warm(M, V):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def eight_point_solve(x1n, x2n, mask, w, Fn, V, warm):  # pragma: no cover - compiled
+def eight_point_solve(x1n, x2n, mask, w2, Fn, V, warm):  # pragma: no cover - compiled
     """Weighted normalized 8-point on the correspondences in ``mask``: ``Fn`` becomes the rank-2 projection of the
-    null vector of ``A^T A``, A the rows of ``x2^T F x1`` times ``w``. Returns a status (``FM_*``).
+    null vector of ``A^T A``, A the rows of ``x2^T F x1`` times the weights, whose squares are ``w2``. Returns a
+    status (``FM_*``).
 
-    ``A^T A = sum_i w_i^2 (x2 x2^T) kron (x1 x1^T)``: the 6 distinct products of x2 times the 6 of x1, 36 sums per
+    ``A^T A = sum_i w2_i (x2 x2^T) kron (x1 x1^T)``: the 6 distinct products of x2 times the 6 of x1, 36 sums per
     point instead of the 45 of the symmetric 9x9 outer product (no branch on the mask: a weight of 0 instead). Its
     eigenvectors go to the columns of ``V`` (9, 9); with ``warm``, ``V`` holds those of a similar system (the
     previous round of a reweighting loop) and only the smallest one is refined (:func:`_smallest_warm`), with the
@@ -681,7 +682,7 @@ def eight_point_solve(x1n, x2n, mask, w, Fn, V, warm):  # pragma: no cover - com
         u = x2n[i, 0]
         v = x2n[i, 1]
         # x2 side (weighted): uu, uv, u, vv, v, 1; x1 side: xx, xy, x, yy, y, 1
-        q5 = w[i] * w[i] if mask[i] else 0.0
+        q5 = w2[i] if mask[i] else 0.0
         q2 = q5 * u
         q4 = q5 * v
         q0 = q2 * u
@@ -1028,13 +1029,14 @@ def _kth(a, n, k):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def noise_cutoff(d, threshold, buf):  # pragma: no cover - compiled
-    """Tukey's cut-off ``_TUKEY_C * sigma`` for Sampson distances ``d``, ``sigma = _MAD_TO_SIGMA * median`` of the
-    distances within ``threshold`` (``threshold`` when there are none), kept within ``[_MIN_C, _FINAL_WSCALE]``
-    times ``threshold``; ``buf``: scratch of len(d)."""
+def noise_cutoff(d, threshold, buf, squared):  # pragma: no cover - compiled
+    """Tukey's cut-off ``_TUKEY_C * sigma`` for Sampson distances ``d`` (their squares with ``squared``),
+    ``sigma = _MAD_TO_SIGMA * median`` of the distances within ``threshold`` (``threshold`` when there are none),
+    kept within ``[_MIN_C, _FINAL_WSCALE]`` times ``threshold``; ``buf``: scratch of len(d)."""
     k = 0
+    t = threshold * threshold if squared else threshold
     for i in range(d.shape[0]):
-        if d[i] <= threshold:
+        if d[i] <= t:
             buf[k] = d[i]
             k += 1
     if k == 0:
@@ -1042,44 +1044,40 @@ def noise_cutoff(d, threshold, buf):  # pragma: no cover - compiled
     else:
         h = k // 2
         med = _kth(buf, k, h)
+        if squared:
+            med = math.sqrt(med)
         if k % 2 == 0:  # the mean of the two middle values: the largest of the lower half is the other one
             lower = buf[0]
             for i in range(1, h):
                 lower = max(lower, buf[i])
-            med = (lower + med) / 2.0
+            med = ((math.sqrt(lower) if squared else lower) + med) / 2.0
         sigma = _MAD_TO_SIGMA * med
     return min(_FINAL_WSCALE * threshold, max(_TUKEY_C * sigma, _MIN_C * threshold))
 
 
 @njit(cache=True, error_model="numpy")
-def refit(x1n, x2n, p1, p2, T1, T2, mask, rounds, w, F, V, warm):  # pragma: no cover - compiled
-    """Sampson-reweighted normalized 8-point on ``mask`` (``rounds`` reweightings; ``w``: scratch of len(p1)): F
+def refit(x1n, x2n, p1, p2, T1, T2, mask, rounds, w2, F, V, warm):  # pragma: no cover - compiled
+    """Sampson-reweighted normalized 8-point on ``mask`` (``rounds`` reweightings; ``w2``: scratch of len(p1)): F
     in pixel coordinates, unit norm. ``V``, ``warm``: the eigenvectors of the 8-point solves
     (:func:`eight_point_solve`). Returns a status (``FM_*``)."""
     Fn = np.empty((3, 3))
     tmp = np.empty((3, 3))
     n = p1.shape[0]
     for i in range(n):
-        w[i] = 1.0
-    status = eight_point_solve(x1n, x2n, mask, w, Fn, V, warm)
+        w2[i] = 1.0
+    status = eight_point_solve(x1n, x2n, mask, w2, Fn, V, warm)
     if status != FM_OK:
         return status
     for _ in range(rounds):
         denormalize(Fn, T1, T2, tmp, F)
-        # algebraic residual / its gradient norm = Sampson distance; the normalization changes the algebraic
-        # scale by a constant factor only
-        total = 0.0
-        cnt = 0
+        # algebraic residual / its gradient norm = Sampson distance: squared weight 1 / den (the normalization
+        # changes the algebraic scale by a constant factor only, and a common scale of the weights changes no
+        # eigenvector)
         for i in range(n):
             if mask[i]:
                 _, den = _epi(F, p1[i, 0], p1[i, 1], p2[i, 0], p2[i, 1])
-                w[i] = 1.0 / math.sqrt(max(den, 1e-300))
-                total += w[i]
-                cnt += 1
-        mean = total / cnt
-        for i in range(n):
-            w[i] /= mean
-        status = eight_point_solve(x1n, x2n, mask, w, Fn, V, True)
+                w2[i] = 1.0 / max(den, 1e-300)
+        status = eight_point_solve(x1n, x2n, mask, w2, Fn, V, True)
         if status != FM_OK:
             return status
     denormalize(Fn, T1, T2, tmp, F)
@@ -1088,38 +1086,33 @@ def refit(x1n, x2n, p1, p2, T1, T2, mask, rounds, w, F, V, warm):  # pragma: no 
 
 
 @njit(cache=True, error_model="numpy")
-def refit_robust(x1n, x2n, p1, p2, T1, T2, F, threshold, rounds, d, den, w, use, buf, V, warm):  # pragma: no cover
+def refit_robust(x1n, x2n, p1, p2, T1, T2, F, threshold, rounds, d2, iden, w2, use, buf, V, warm):  # pragma: no cover
     """Iteratively reweighted 8-point of F (in place) over every correspondence, weights ``Tukey(d / c) / sqrt(den)``
     with the cut-off c of :func:`noise_cutoff` re-estimated each round; stops early when fewer than 8 fall within
-    it. ``d, den, w, use, buf``: scratch of len(p1); ``V``, ``warm``: as for :func:`refit`. Returns a status
-    (``FM_*``)."""
+    it. Works on squared distances and weights (no square root per correspondence). ``d2, iden, w2, use, buf``:
+    scratch of len(p1); ``V``, ``warm``: as for :func:`refit`. Returns a status (``FM_*``)."""
     Fn = np.empty((3, 3))
     tmp = np.empty((3, 3))
     n = p1.shape[0]
     for _ in range(rounds):
         for i in range(n):
             num, de = _epi(F, p1[i, 0], p1[i, 1], p2[i, 0], p2[i, 1])
-            de = max(de, 1e-300)
-            den[i] = de
-            d[i] = abs(num) / math.sqrt(de)
-        c = noise_cutoff(d, threshold, buf)
+            r = 1.0 / max(de, 1e-300)
+            iden[i] = r
+            d2[i] = num * num * r
+        c = noise_cutoff(d2, threshold, buf, True)
+        c2 = c * c
         cnt = 0
         for i in range(n):
-            use[i] = d[i] < c
+            use[i] = d2[i] < c2
             cnt += use[i]
         if cnt < 8:
             break
-        total = 0.0
         for i in range(n):
-            if use[i]:
-                t = d[i] / c
-                t = 1.0 - t * t
-                w[i] = t * t / math.sqrt(den[i])
-                total += w[i]
-        mean = total / cnt
-        for i in range(n):
-            w[i] /= mean
-        status = eight_point_solve(x1n, x2n, use, w, Fn, V, warm)
+            t = 1.0 - d2[i] / c2
+            t *= t
+            w2[i] = t * t * iden[i] if use[i] else 0.0
+        status = eight_point_solve(x1n, x2n, use, w2, Fn, V, warm)
         if status != FM_OK:
             return status
         warm = True

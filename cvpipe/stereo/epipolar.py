@@ -141,7 +141,7 @@ def _eight_point_normalized(x1n: np.ndarray, x2n: np.ndarray, w: np.ndarray | No
     # the null vector of A from the 9x9 normal matrix (Hartley normalization keeps it well conditioned): an
     # eigen-decomposition of 9x9 instead of an SVD of N x 9
     Fn = np.empty((3, 3))
-    status = K.eight_point_solve(x1n, x2n, np.ones(len(x1n), np.bool_), np.ones(len(x1n)) if w is None else w, Fn,
+    status = K.eight_point_solve(x1n, x2n, np.ones(len(x1n), np.bool_), np.ones(len(x1n)) if w is None else w * w, Fn,
                                  np.empty((9, 9)), False)
     if status != K.FM_OK:
         raise EstimationError(_SOLVE_ERRORS[status])
@@ -280,7 +280,7 @@ def _noise_cutoff(d: np.ndarray, threshold: float) -> float:
     robustly from the inliers (``1.4826 * median`` of the distances within ``threshold``), kept within
     ``[_MIN_C, _FINAL_WSCALE] * threshold`` (the kernel :func:`cvpipe.stereo._kernels.noise_cutoff`)."""
     d = np.ascontiguousarray(d, dtype=np.float64)
-    return float(K.noise_cutoff(d, float(threshold), np.empty(len(d))))
+    return float(K.noise_cutoff(d, float(threshold), np.empty(len(d)), False))
 
 
 def _homography_share(p1: np.ndarray, p2: np.ndarray, threshold: float, rng: np.random.Generator) -> float:
