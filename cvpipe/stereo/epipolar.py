@@ -379,7 +379,8 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
             raise EstimationError(_PLANAR_MESSAGE)
         raise EstimationError(f"all {attempts} sampled 7-point sets were degenerate; the correspondences are "
                               "nearly collinear or repeated")
-    mask = sampson_distance(best_F, p1, p2) <= threshold
+    d_best = sampson_distance(best_F, p1, p2)
+    mask = d_best <= threshold
     if mask.sum() < min_inliers:
         raise EstimationError(
             f"only {int(mask.sum())} correspondences fit one epipolar geometry within {threshold} px (need "
@@ -387,7 +388,7 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
     # several starts for the final refinement (see _FINAL_STARTS): keep the lowest final cost
     # the starts compete on the MSAC cost truncated at the noise cut-off of the RANSAC model, not at the threshold:
     # with the threshold 5-10x the noise, the tail would decide between nearly equal models
-    sel2 = _noise_cutoff(sampson_distance(best_F, p1, p2), float(threshold)) ** 2
+    sel2 = _noise_cutoff(d_best, float(threshold)) ** 2
     starts = history[-_FINAL_STARTS:] + [f for _, f in sorted(pool, key=lambda t: t[0])[:_FINAL_STARTS]]
     # a cheap look at each start (two robust rounds), then the full refinement of the two most promising
     F = np.empty((3, 3))
