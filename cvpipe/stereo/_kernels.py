@@ -741,10 +741,12 @@ def _sample7(u, n, pick, chosen):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def _null2(A, F1, F2):  # pragma: no cover - compiled
+def _null2(A, F1, F2, perm):  # pragma: no cover - compiled
     """An orthonormal basis (F1, F2) of the null space of the 7x9 system A (overwritten), by Gauss-Jordan
-    elimination with full pivoting; False when A has rank below 7 (7th pivot below ``_RANK_EPS`` of the 1st)."""
-    perm = np.arange(9)
+    elimination with full pivoting; False when A has rank below 7 (7th pivot below ``_RANK_EPS`` of the 1st).
+    ``perm``: (9,) int64 scratch."""
+    for j in range(9):
+        perm[j] = j
     first = 0.0
     for r in range(7):
         big = 0.0
@@ -921,17 +923,13 @@ def _cubic_roots(c3, c2, c1, c0, out):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def seven_point(x1n, x2n, pick, Fns):  # pragma: no cover - compiled
+def seven_point(x1n, x2n, pick, Fns, A, F1, F2, D, roots, perm):  # pragma: no cover - compiled
     """The fundamental matrices (normalized coordinates) through the 7 correspondences ``pick`` into ``Fns``
     (3, 3, 3); returns their number, 0 for a degenerate sample.
 
     The 1 to 3 real roots a of ``det(a F1 + (1 - a) F2) = 0`` over the null space (F1, F2) of the 7x9 system.
+    Scratch (none allocated per sample): ``A`` (7, 9), ``F1, F2, D`` (3, 3), ``roots`` (3,), ``perm`` (9,) int64.
     """
-    A = np.empty((7, 9))
-    F1 = np.empty((3, 3))
-    F2 = np.empty((3, 3))
-    D = np.empty((3, 3))
-    roots = np.empty(3)
     for r in range(7):
         i = pick[r]
         x, y, xp, yp = x1n[i, 0], x1n[i, 1], x2n[i, 0], x2n[i, 1]
@@ -944,7 +942,7 @@ def seven_point(x1n, x2n, pick, Fns):  # pragma: no cover - compiled
         A[r, 6] = x
         A[r, 7] = y
         A[r, 8] = 1.0
-    if not _null2(A, F1, F2):
+    if not _null2(A, F1, F2, perm):
         return 0
     for i in range(3):
         for j in range(3):
@@ -974,11 +972,17 @@ def ransac_batch(u, x1n, x2n, p1, p2, T1, T2, thr2, models, costs):  # pragma: n
     chosen = np.empty(7, np.int64)
     Fns = np.empty((3, 3, 3))
     tmp = np.empty((3, 3))
+    A = np.empty((7, 9))
+    F1 = np.empty((3, 3))
+    F2 = np.empty((3, 3))
+    D = np.empty((3, 3))
+    roots = np.empty(3)
+    perm = np.empty(9, np.int64)
     m = 0
     regular = 0
     for k in range(u.shape[0]):
         _sample7(u[k], n, pick, chosen)
-        nr = seven_point(x1n, x2n, pick, Fns)
+        nr = seven_point(x1n, x2n, pick, Fns, A, F1, F2, D, roots, perm)
         if nr == 0:
             continue
         regular += 1

@@ -233,7 +233,8 @@ def seven_point(pts1, pts2) -> list[np.ndarray]:
         raise InputError(f"the 7-point solver needs exactly 7 correspondences, got {len(p1)} and {len(p2)}")
     T1, T2 = hartley_normalization(p1), hartley_normalization(p2)
     Fns = np.empty((3, 3, 3))
-    count = K.seven_point(_apply(T1, p1), _apply(T2, p2), np.arange(7), Fns)
+    count = K.seven_point(_apply(T1, p1), _apply(T2, p2), np.arange(7), Fns, np.empty((7, 9)), np.empty((3, 3)),
+                          np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty(9, np.int64))
     if count == 0:
         raise EstimationError("the 7-point sample is degenerate (repeated or collinear points); draw another")
     return [_unit(T2.T @ f @ T1) for f in Fns[:count]]
