@@ -1216,3 +1216,42 @@ def final_refinement(x1n, x2n, p1, p2, T1, T2, starts, threshold, sel2, min_inli
             F[:, :] = cand
             found = True
     return found
+
+
+@njit(cache=True, error_model="numpy")
+def normalize_points(p, eps, T, out):  # pragma: no cover - compiled
+    """Hartley normalization of the (N, 2) points ``p`` in one pass over them: ``T`` (3, 3) moves their centroid to
+    the origin and their mean distance to it to sqrt(2), ``out`` (N, 2) gets the normalized points. Returns False,
+    and leaves both untouched, when the points are collinear or coincide: the smaller principal axis of the centred
+    points is at most ``eps`` times the larger one (as :func:`cvpipe.geometry.collinear`, from the 2x2 scatter
+    matrix instead of an SVD: its eigenvalue ratio at most eps^2)."""
+    n = p.shape[0]
+    cx = 0.0
+    cy = 0.0
+    for i in range(n):
+        cx += p[i, 0]
+        cy += p[i, 1]
+    cx /= n
+    cy /= n
+    a = b = c = dist = 0.0
+    for i in range(n):
+        x = p[i, 0] - cx
+        y = p[i, 1] - cy
+        a += x * x
+        b += x * y
+        c += y * y
+        dist += math.sqrt(x * x + y * y)
+    l0 = 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
+    if not l0 > 0.0 or a * c - b * b <= eps * eps * l0 * l0:
+        return False
+    s = math.sqrt(2.0) / (dist / n)
+    T[:, :] = 0.0
+    T[0, 0] = s
+    T[1, 1] = s
+    T[0, 2] = -s * cx
+    T[1, 2] = -s * cy
+    T[2, 2] = 1.0
+    for i in range(n):
+        out[i, 0] = (p[i, 0] - cx) * s
+        out[i, 1] = (p[i, 1] - cy) * s
+    return True

@@ -5,7 +5,8 @@
 has rank 2, and a correspondence is an inlier when its Sampson distance (the first-order geometric distance of the
 pair to the epipolar variety, in pixels) is at most ``threshold``. The pipeline is
 
-1. Hartley normalization of both point sets (``cvpipe.geometry.hartley_normalization``);
+1. Hartley normalization of both point sets (as ``cvpipe.geometry.hartley_normalization``, in one pass with the
+   test that they are not all on one line);
 2. RANSAC over minimal 7-point samples, solved in batches: the 2-D null space of the 7x9 epipolar system, then the
    one to three real roots of the cubic ``det(a F1 + (1 - a) F2) = 0``; samples whose system has rank below 7
    (repeated or collinear points) are skipped. Hypotheses are scored by MSAC (truncated squared Sampson distance)
@@ -36,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import EstimationError, InputError
-from ..geometry import as_points, collinear, hartley_normalization
+from ..geometry import as_points, hartley_normalization
 from ..params import StereoRectifyParams
 from . import _kernels as K
 from ._kernels import _FINAL_WSCALE, _MAD_TO_SIGMA, _MIN_C, _RANK_EPS, _REFINE_ROUNDS, _TUKEY_C  # noqa: F401
@@ -98,7 +99,8 @@ class FundamentalFit:
 # ----------------------------------------------------------------------------------------------- validation
 
 
-def _check_pair(pts1, pts2, minimum: int) -> tuple[np.ndarray, np.ndarray]:
+def _check_pair(pts1, pts2, minimum: int):
+    """(p1, p2, T1, T2, x1n, x2n): the validated points, their Hartley normalizations and the normalized points."""
     p1, p2 = as_points("pts1", pts1), as_points("pts2", pts2)
     if len(p1) != len(p2):
         raise InputError(f"`pts1` and `pts2` must have the same number of points, got {len(p1)} and {len(p2)}")
@@ -106,12 +108,16 @@ def _check_pair(pts1, pts2, minimum: int) -> tuple[np.ndarray, np.ndarray]:
         raise EstimationError(
             f"a fundamental matrix needs at least {minimum} correspondences, got {len(p1)}: the views share too "
             "little (more overlap, more features or a looser ratio test)")
+    normalized = []
     for name, p in (("pts1", p1), ("pts2", p2)):
-        if collinear(p, _ALL_COLLINEAR_EPS):
+        T, x = np.empty((3, 3)), np.empty_like(p)
+        if not K.normalize_points(p, _ALL_COLLINEAR_EPS, T, x):
             raise EstimationError(
                 f"all `{name}` points are collinear or coincident, so the fundamental matrix is undetermined; "
                 "supply correspondences spread over the image")
-    return p1, p2
+        normalized.append((T, x))
+    (T1, x1n), (T2, x2n) = normalized
+    return p1, p2, T1, T2, x1n, x2n
 
 
 # ------------------------------------------------------------------------------------------------ solvers
@@ -173,14 +179,13 @@ def eight_point(pts1, pts2, weights=None) -> np.ndarray:
     EstimationError
         Fewer than 8 points, all points collinear, or a rank-deficient system.
     """
-    p1, p2 = _check_pair(pts1, pts2, 8)
+    p1, p2, T1, T2, x1n, x2n = _check_pair(pts1, pts2, 8)
     w = None
     if weights is not None:
         w = np.asarray(weights, dtype=np.float64)
         if w.shape != (len(p1),) or not np.isfinite(w).all() or (w < 0).any():
             raise InputError(f"`weights` must be {len(p1)} finite non-negative numbers")
-    T1, T2 = hartley_normalization(p1), hartley_normalization(p2)
-    Fn = _eight_point_normalized(_apply(T1, p1), _apply(T2, p2), w)
+    Fn = _eight_point_normalized(x1n, x2n, w)
     return _unit(T2.T @ Fn @ T1)
 
 
@@ -194,10 +199,9 @@ def sampson_least_squares(pts1, pts2, rounds: int = _REFINE_ROUNDS) -> np.ndarra
     """
     if isinstance(rounds, bool) or not isinstance(rounds, (int, np.integer)) or rounds < 0:
         raise InputError(f"`rounds` must be an integer >= 0, got {rounds!r}")
-    p1, p2 = _check_pair(pts1, pts2, 8)
-    T1, T2 = hartley_normalization(p1), hartley_normalization(p2)
+    p1, p2, T1, T2, x1n, x2n = _check_pair(pts1, pts2, 8)
     F = np.empty((3, 3))
-    status = K.refit(_apply(T1, p1), _apply(T2, p2), p1, p2, T1, T2, np.ones(len(p1), np.bool_), int(rounds),
+    status = K.refit(x1n, x2n, p1, p2, T1, T2, np.ones(len(p1), np.bool_), int(rounds),
                      np.empty(len(p1)), F, np.empty((9, 9)), False)
     if status != K.FM_OK:
         raise EstimationError(_SOLVE_ERRORS[status])
@@ -336,12 +340,10 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
         raise InputError(f"`max_iters` must be an integer >= 1, got {max_iters!r}")
     if isinstance(min_inliers, bool) or not isinstance(min_inliers, (int, np.integer)) or min_inliers < 8:
         raise InputError(f"`min_inliers` must be an integer >= 8, got {min_inliers!r}")
-    p1, p2 = _check_pair(pts1, pts2, 8)
+    p1, p2, T1, T2, x1n, x2n = _check_pair(pts1, pts2, 8)
     gen = np.random.default_rng(rng)
     n = len(p1)
     thr2 = float(threshold) ** 2
-    T1, T2 = hartley_normalization(p1), hartley_normalization(p2)
-    x1n, x2n = _apply(T1, p1), _apply(T2, p2)
     log1mconf = math.log1p(-float(confidence))
 
     best_F, best_cost, best_count, history, pool = None, np.inf, 0, [], []
