@@ -657,62 +657,73 @@ def _smallest_warm(M, V):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def eight_point_solve(x1n, x2n, mask, w2, Fn, V, warm):  # pragma: no cover - compiled
-    """Weighted normalized 8-point on the correspondences in ``mask``: ``Fn`` becomes the rank-2 projection of the
-    null vector of ``A^T A``, A the rows of ``x2^T F x1`` times the weights, whose squares are ``w2``. Returns a
-    status (``FM_*``).
-
-    ``A^T A = sum_i w2_i (x2 x2^T) kron (x1 x1^T)``: the 6 distinct products of x2 times the 6 of x1, 36 sums per
-    point instead of the 45 of the symmetric 9x9 outer product (no branch on the mask: a weight of 0 instead). Its
-    eigenvectors go to the columns of ``V`` (9, 9); with ``warm``, ``V`` holds those of a similar system (the
-    previous round of a reweighting loop) and only the smallest one is refined (:func:`_smallest_warm`), with the
-    full decomposition when that fails.
-    """
-    cnt = 0
-    s00 = s01 = s02 = s03 = s04 = s05 = 0.0
-    s10 = s11 = s12 = s13 = s14 = s15 = 0.0
-    s20 = s21 = s22 = s23 = s24 = s25 = 0.0
-    s30 = s31 = s32 = s33 = s34 = s35 = 0.0
-    s40 = s41 = s42 = s43 = s44 = s45 = 0.0
-    s50 = s51 = s52 = s53 = s54 = s55 = 0.0
+def design_products(x1n, x2n, PT):  # pragma: no cover - compiled
+    """``PT[6 a + b, i] = q_a r_b`` for correspondence i, q = (u^2, uv, u, v^2, v, 1) of x2n = (u, v) and
+    r = (x^2, xy, x, y^2, y, 1) of x1n = (x, y): the normal matrix of the 8-point system with squared weights w2 is
+    ``PT @ w2`` (see :func:`eight_point_solve`). Computed once per point set, as the points do not change between
+    the reweighting rounds."""
     for i in range(x1n.shape[0]):
-        cnt += mask[i]
         x = x1n[i, 0]
         y = x1n[i, 1]
         u = x2n[i, 0]
         v = x2n[i, 1]
-        # x2 side (weighted): uu, uv, u, vv, v, 1; x1 side: xx, xy, x, yy, y, 1
-        q5 = w2[i] if mask[i] else 0.0
-        q2 = q5 * u
-        q4 = q5 * v
-        q0 = q2 * u
-        q1 = q2 * v
-        q3 = q4 * v
-        r0 = x * x
-        r1 = x * y
-        r3 = y * y
-        s00 += q0 * r0; s01 += q0 * r1; s02 += q0 * x; s03 += q0 * r3; s04 += q0 * y; s05 += q0  # noqa: E702
-        s10 += q1 * r0; s11 += q1 * r1; s12 += q1 * x; s13 += q1 * r3; s14 += q1 * y; s15 += q1  # noqa: E702
-        s20 += q2 * r0; s21 += q2 * r1; s22 += q2 * x; s23 += q2 * r3; s24 += q2 * y; s25 += q2  # noqa: E702
-        s30 += q3 * r0; s31 += q3 * r1; s32 += q3 * x; s33 += q3 * r3; s34 += q3 * y; s35 += q3  # noqa: E702
-        s40 += q4 * r0; s41 += q4 * r1; s42 += q4 * x; s43 += q4 * r3; s44 += q4 * y; s45 += q4  # noqa: E702
-        s50 += q5 * r0; s51 += q5 * r1; s52 += q5 * x; s53 += q5 * r3; s54 += q5 * y; s55 += q5  # noqa: E702
-    if cnt < 8:
+        r0, r1, r2, r3, r4 = x * x, x * y, x, y * y, y
+        for a in range(6):
+            if a == 0:
+                q = u * u
+            elif a == 1:
+                q = u * v
+            elif a == 2:
+                q = u
+            elif a == 3:
+                q = v * v
+            elif a == 4:
+                q = v
+            else:
+                q = 1.0
+            PT[6 * a, i] = q * r0
+            PT[6 * a + 1, i] = q * r1
+            PT[6 * a + 2, i] = q * r2
+            PT[6 * a + 3, i] = q * r3
+            PT[6 * a + 4, i] = q * r4
+            PT[6 * a + 5, i] = q
+    return PT
+
+
+@njit(cache=True, error_model="numpy", fastmath={"reassoc"})
+def _normal_sums(PT, w2, S):  # pragma: no cover - compiled
+    """``S = PT @ w2``: 36 dot products, each vectorized (reassociated)."""
+    n = w2.shape[0]
+    for k in range(36):
+        t = 0.0
+        for i in range(n):
+            t += PT[k, i] * w2[i]
+        S[k] = t
+
+
+@njit(cache=True, error_model="numpy")
+def eight_point_solve(PT, w2, count, Fn, V, warm):  # pragma: no cover - compiled
+    """Weighted normalized 8-point: ``Fn`` becomes the rank-2 projection of the null vector of ``A^T A``, A the rows
+    of ``x2^T F x1`` times the weights, whose squares are ``w2`` (0 for the correspondences left out; ``count``:
+    the rows used). Returns a status (``FM_*``).
+
+    ``A^T A = sum_i w2_i (x2 x2^T) kron (x1 x1^T)``: the 6 distinct products of x2 times the 6 of x1, 36 sums
+    (``PT`` from :func:`design_products`) instead of the 45 of the symmetric 9x9 outer product. Its eigenvectors go
+    to the columns of ``V`` (9, 9); with ``warm``, ``V`` holds those of a similar system (the previous round of a
+    reweighting loop) and only the smallest one is refined (:func:`_smallest_warm`), with the full decomposition
+    when that fails.
+    """
+    if count < 8:
         return FM_TOO_FEW
-    S = np.empty((6, 6))
-    S[0, 0], S[0, 1], S[0, 2], S[0, 3], S[0, 4], S[0, 5] = s00, s01, s02, s03, s04, s05
-    S[1, 0], S[1, 1], S[1, 2], S[1, 3], S[1, 4], S[1, 5] = s10, s11, s12, s13, s14, s15
-    S[2, 0], S[2, 1], S[2, 2], S[2, 3], S[2, 4], S[2, 5] = s20, s21, s22, s23, s24, s25
-    S[3, 0], S[3, 1], S[3, 2], S[3, 3], S[3, 4], S[3, 5] = s30, s31, s32, s33, s34, s35
-    S[4, 0], S[4, 1], S[4, 2], S[4, 3], S[4, 4], S[4, 5] = s40, s41, s42, s43, s44, s45
-    S[5, 0], S[5, 1], S[5, 2], S[5, 3], S[5, 4], S[5, 5] = s50, s51, s52, s53, s54, s55
+    S = np.empty(36)
+    _normal_sums(PT, w2, S)
     # entry (3a + b, 3c + d) of the 9x9 matrix is sum w^2 x2_a x2_c x1_b x1_d
     M = np.empty((9, 9))
     for a in range(3):
         for b in range(3):
             for c in range(3):
                 for d in range(3):
-                    M[3 * a + b, 3 * c + d] = S[_SYM6[a, c], _SYM6[b, d]]
+                    M[3 * a + b, 3 * c + d] = S[6 * _SYM6[a, c] + _SYM6[b, d]]
     if not (warm and _smallest_warm(M, V)):
         ev = _jacobi_eigh(M, V)
         if ev[1] <= 1e-24 * max(ev[8], 1e-300):
@@ -1060,16 +1071,18 @@ def noise_cutoff(d, threshold, buf, squared):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def refit(x1n, x2n, p1, p2, T1, T2, mask, rounds, w2, F, V, warm):  # pragma: no cover - compiled
+def refit(PT, p1, p2, T1, T2, mask, rounds, w2, F, V, warm):  # pragma: no cover - compiled
     """Sampson-reweighted normalized 8-point on ``mask`` (``rounds`` reweightings; ``w2``: scratch of len(p1)): F
-    in pixel coordinates, unit norm. ``V``, ``warm``: the eigenvectors of the 8-point solves
-    (:func:`eight_point_solve`). Returns a status (``FM_*``)."""
+    in pixel coordinates, unit norm. ``PT``, ``V``, ``warm``: as for :func:`eight_point_solve`. Returns a status
+    (``FM_*``)."""
     Fn = np.empty((3, 3))
     tmp = np.empty((3, 3))
     n = p1.shape[0]
+    cnt = 0
     for i in range(n):
-        w2[i] = 1.0
-    status = eight_point_solve(x1n, x2n, mask, w2, Fn, V, warm)
+        w2[i] = 1.0 if mask[i] else 0.0
+        cnt += mask[i]
+    status = eight_point_solve(PT, w2, cnt, Fn, V, warm)
     if status != FM_OK:
         return status
     for _ in range(rounds):
@@ -1081,7 +1094,7 @@ def refit(x1n, x2n, p1, p2, T1, T2, mask, rounds, w2, F, V, warm):  # pragma: no
             if mask[i]:
                 _, den = _epi(F, p1[i, 0], p1[i, 1], p2[i, 0], p2[i, 1])
                 w2[i] = 1.0 / max(den, 1e-300)
-        status = eight_point_solve(x1n, x2n, mask, w2, Fn, V, True)
+        status = eight_point_solve(PT, w2, cnt, Fn, V, True)
         if status != FM_OK:
             return status
     denormalize(Fn, T1, T2, tmp, F)
@@ -1090,7 +1103,7 @@ def refit(x1n, x2n, p1, p2, T1, T2, mask, rounds, w2, F, V, warm):  # pragma: no
 
 
 @njit(cache=True, error_model="numpy")
-def refit_robust(x1n, x2n, p1, p2, T1, T2, F, threshold, rounds, d2, iden, w2, use, buf, V, warm):  # pragma: no cover
+def refit_robust(PT, p1, p2, T1, T2, F, threshold, rounds, d2, iden, w2, use, buf, V, warm):  # pragma: no cover
     """Iteratively reweighted 8-point of F (in place) over every correspondence, weights ``Tukey(d / c) / sqrt(den)``
     with the cut-off c of :func:`noise_cutoff` re-estimated each round; stops early when fewer than 8 fall within
     it. Works on squared distances and weights (no square root per correspondence). ``d2, iden, w2, use, buf``:
@@ -1116,7 +1129,7 @@ def refit_robust(x1n, x2n, p1, p2, T1, T2, F, threshold, rounds, d2, iden, w2, u
             t = 1.0 - d2[i] / c2
             t *= t
             w2[i] = t * t * iden[i] if use[i] else 0.0
-        status = eight_point_solve(x1n, x2n, use, w2, Fn, V, warm)
+        status = eight_point_solve(PT, w2, cnt, Fn, V, warm)
         if status != FM_OK:
             return status
         warm = True
@@ -1126,27 +1139,27 @@ def refit_robust(x1n, x2n, p1, p2, T1, T2, F, threshold, rounds, d2, iden, w2, u
 
 
 @njit(cache=True, error_model="numpy")
-def local_optimize(x1n, x2n, p1, p2, T1, T2, F0, thr2, F):  # pragma: no cover - compiled
+def local_optimize(PT, p1, p2, T1, T2, F0, thr2, F):  # pragma: no cover - compiled
     """LO of a new so-far-best model: the unweighted 8-point model F of the correspondences within the threshold
     of F0. Returns (ok, MSAC cost of F)."""
     n = p1.shape[0]
     mask = np.empty(n, np.bool_)
     if count_within(F0, p1, p2, thr2, mask) < 8:
         return False, np.inf
-    if refit(x1n, x2n, p1, p2, T1, T2, mask, 0, np.empty(n), F, np.empty((9, 9)), False) != FM_OK:
+    if refit(PT, p1, p2, T1, T2, mask, 0, np.empty(n), F, np.empty((9, 9)), False) != FM_OK:
         return False, np.inf
     return True, msac_cost(F, p1, p2, thr2, np.inf)
 
 
 @njit(cache=True, error_model="numpy")
-def _finish(x1n, x2n, p1, p2, T1, T2, F, threshold, min_inliers, d, den, w, use, buf, mask, new, V):  # pragma: no cover
+def _finish(PT, p1, p2, T1, T2, F, threshold, min_inliers, d, den, w, use, buf, mask, new, V):  # pragma: no cover
     """The final refinement of one model (F in place): reweighted 8-point refits with inlier re-selection, then the
     robust refit. Returns a status (``FM_*``)."""
     thr2 = threshold * threshold
     count_within(F, p1, p2, thr2, mask)
     warm = False
     for _ in range(2):  # refit, re-select inliers, refit (the inlier set settles in one or two rounds)
-        status = refit(x1n, x2n, p1, p2, T1, T2, mask, _REFINE_ROUNDS, w, F, V, warm)
+        status = refit(PT, p1, p2, T1, T2, mask, _REFINE_ROUNDS, w, F, V, warm)
         warm = True
         if status != FM_OK:
             return status
@@ -1160,7 +1173,7 @@ def _finish(x1n, x2n, p1, p2, T1, T2, F, threshold, min_inliers, d, den, w, use,
             break
         mask[:] = new
     if _FINAL_WSCALE > 0:
-        return refit_robust(x1n, x2n, p1, p2, T1, T2, F, threshold, _REFINE_ROUNDS, d, den, w, use, buf, V, True)
+        return refit_robust(PT, p1, p2, T1, T2, F, threshold, _REFINE_ROUNDS, d, den, w, use, buf, V, True)
     return FM_OK
 
 
@@ -1174,7 +1187,7 @@ def _same(A, B):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def final_refinement(x1n, x2n, p1, p2, T1, T2, starts, threshold, sel2, min_inliers, quick_rounds, full,
+def final_refinement(PT, p1, p2, T1, T2, starts, threshold, sel2, min_inliers, quick_rounds, full,
                      F):  # pragma: no cover - compiled
     """The multi-start final refinement: each start gets ``quick_rounds`` robust rounds, the ``full`` lowest of
     those (MSAC cost truncated at ``sel2``; ties in the order of ``starts``) get the whole refinement
@@ -1193,7 +1206,7 @@ def final_refinement(x1n, x2n, p1, p2, T1, T2, starts, threshold, sel2, min_inli
     qcost = np.full(s, np.inf)
     for k in range(s):
         quick[k] = starts[k]
-        if refit_robust(x1n, x2n, p1, p2, T1, T2, quick[k], threshold, quick_rounds, d, den, w, use, buf, V,
+        if refit_robust(PT, p1, p2, T1, T2, quick[k], threshold, quick_rounds, d, den, w, use, buf, V,
                         False) == FM_OK:
             qcost[k] = msac_cost(quick[k], p1, p2, sel2, np.inf)
     order = np.argsort(qcost, kind="mergesort")
@@ -1207,7 +1220,7 @@ def final_refinement(x1n, x2n, p1, p2, T1, T2, starts, threshold, sel2, min_inli
         if t > 0 and _same(quick[k], quick[order[t - 1]]):
             continue  # the same start as the previous one (a model that is both a so-far-best and in the pool)
         cand[:, :] = quick[k]
-        if _finish(x1n, x2n, p1, p2, T1, T2, cand, threshold, min_inliers, d, den, w, use, buf, mask, new,
+        if _finish(PT, p1, p2, T1, T2, cand, threshold, min_inliers, d, den, w, use, buf, mask, new,
                    V) != FM_OK:
             continue
         c = msac_cost(cand, p1, p2, sel2, np.inf)

@@ -143,11 +143,16 @@ _SOLVE_ERRORS = {
 }
 
 
+def _products(x1n: np.ndarray, x2n: np.ndarray) -> np.ndarray:
+    """The (36, N) products of the 8-point system's monomials (:func:`cvpipe.stereo._kernels.design_products`)."""
+    return K.design_products(x1n, x2n, np.empty((36, len(x1n))))
+
+
 def _eight_point_normalized(x1n: np.ndarray, x2n: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
     # the null vector of A from the 9x9 normal matrix (Hartley normalization keeps it well conditioned): an
     # eigen-decomposition of 9x9 instead of an SVD of N x 9
     Fn = np.empty((3, 3))
-    status = K.eight_point_solve(x1n, x2n, np.ones(len(x1n), np.bool_), np.ones(len(x1n)) if w is None else w * w, Fn,
+    status = K.eight_point_solve(_products(x1n, x2n), np.ones(len(x1n)) if w is None else w * w, len(x1n), Fn,
                                  np.empty((9, 9)), False)
     if status != K.FM_OK:
         raise EstimationError(_SOLVE_ERRORS[status])
@@ -201,7 +206,7 @@ def sampson_least_squares(pts1, pts2, rounds: int = _REFINE_ROUNDS) -> np.ndarra
         raise InputError(f"`rounds` must be an integer >= 0, got {rounds!r}")
     p1, p2, T1, T2, x1n, x2n = _check_pair(pts1, pts2, 8)
     F = np.empty((3, 3))
-    status = K.refit(x1n, x2n, p1, p2, T1, T2, np.ones(len(p1), np.bool_), int(rounds),
+    status = K.refit(_products(x1n, x2n), p1, p2, T1, T2, np.ones(len(p1), np.bool_), int(rounds),
                      np.empty(len(p1)), F, np.empty((9, 9)), False)
     if status != K.FM_OK:
         raise EstimationError(_SOLVE_ERRORS[status])
@@ -341,6 +346,7 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
     if isinstance(min_inliers, bool) or not isinstance(min_inliers, (int, np.integer)) or min_inliers < 8:
         raise InputError(f"`min_inliers` must be an integer >= 8, got {min_inliers!r}")
     p1, p2, T1, T2, x1n, x2n = _check_pair(pts1, pts2, 8)
+    PT = _products(x1n, x2n)
     gen = np.random.default_rng(rng)
     n = len(p1)
     thr2 = float(threshold) ** 2
@@ -367,7 +373,7 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
             history.append(best_F)
             # local optimization: the least-squares model of the new best's inliers
             F_lo = np.empty((3, 3))
-            ok, c_lo = K.local_optimize(x1n, x2n, p1, p2, T1, T2, best_F, thr2, F_lo)
+            ok, c_lo = K.local_optimize(PT, p1, p2, T1, T2, best_F, thr2, F_lo)
             if ok and c_lo < best_cost:
                 best_cost, best_F = c_lo, F_lo
                 history.append(best_F)
@@ -395,7 +401,7 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
     starts = history[-_FINAL_STARTS:] + [f for _, f in sorted(pool, key=lambda t: t[0])[:_FINAL_STARTS]]
     # a cheap look at each start (two robust rounds), then the full refinement of the two most promising
     F = np.empty((3, 3))
-    if not K.final_refinement(x1n, x2n, p1, p2, T1, T2, np.array(starts), float(threshold), sel2, int(min_inliers),
+    if not K.final_refinement(PT, p1, p2, T1, T2, np.array(starts), float(threshold), sel2, int(min_inliers),
                               2, 2, F):
         F = best_F
     d = sampson_distance(F, p1, p2)
