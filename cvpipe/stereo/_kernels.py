@@ -969,14 +969,14 @@ def seven_point(x1n, x2n, pick, Fns, A, F1, F2, D, roots, perm):  # pragma: no c
 
 
 @njit(cache=True, error_model="numpy")
-def ransac_batch(u, x1n, x2n, p1, p2, T1, T2, thr2, models, costs):  # pragma: no cover - compiled
+def ransac_batch(u, x1n, x2n, p1, p2, T1, T2, thr2, keep, models, costs):  # pragma: no cover - compiled
     """Solve (:func:`seven_point`) and score the 7-point samples drawn from the uniforms ``u`` (K, 7).
 
     Each solution goes to ``models`` in pixel coordinates with its MSAC cost in ``costs``. A model whose partial
-    cost already exceeds the 4th lowest cost of the batch is not finished (cost inf): it cannot be among the lowest
-    four, which is all the caller keeps. To find those four early, every model is first scored on the first block
-    of correspondences and the models are finished in the order of those partial costs; the finished costs do not
-    depend on that order. Returns (models, samples that gave a model).
+    cost already exceeds the ``keep``-th lowest cost of the batch is not finished (cost inf): it cannot be among the
+    lowest ``keep``, which is all the caller keeps. To find those early, every model is first scored on the first
+    block of correspondences and the models are finished in the order of those partial costs; the finished costs do
+    not depend on that order. Returns (models, samples that gave a model).
     """
     n = p1.shape[0]
     pick = np.empty(7, np.int64)
@@ -1002,12 +1002,12 @@ def ransac_batch(u, x1n, x2n, p1, p2, T1, T2, thr2, models, costs):  # pragma: n
             denormalize(Fns[r], T1, T2, tmp, F)
             costs[m] = _msac_block(F, p1, p2, thr2, 0, min(_COST_BLOCK, n))
             m += 1
-    low = np.full(4, np.inf)  # the four lowest costs of the batch so far, ascending
+    low = np.full(keep, np.inf)  # the lowest costs of the batch so far, ascending
     for j in np.argsort(costs[:m]):
-        cost = _msac_from(models[j], p1, p2, thr2, 1, costs[j], low[3])
+        cost = _msac_from(models[j], p1, p2, thr2, 1, costs[j], low[keep - 1])
         costs[j] = cost
-        if cost < low[3]:
-            t = 3
+        if cost < low[keep - 1]:
+            t = keep - 1
             while t > 0 and low[t - 1] > cost:
                 low[t] = low[t - 1]
                 t -= 1

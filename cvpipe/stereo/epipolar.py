@@ -359,7 +359,8 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
         # 7 distinct indices per sample from 7 uniforms (exact sampling without replacement, in the kernel); the
         # models of the batch in pixel coordinates with their MSAC costs (those that cannot be among the lowest
         # _POOL_PER_BATCH are left unfinished at cost inf)
-        m, regular = K.ransac_batch(gen.random((_BATCH, 7)), x1n, x2n, p1, p2, T1, T2, thr2, models, costs)
+        m, regular = K.ransac_batch(gen.random((_BATCH, 7)), x1n, x2n, p1, p2, T1, T2, thr2, _POOL_PER_BATCH,
+                                    models, costs)
         attempts += _BATCH
         iterations += regular
         if m == 0:
