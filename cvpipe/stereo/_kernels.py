@@ -5,8 +5,12 @@ background fill. They only compute: the checks live in the public functions.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit, prange
+
+from ..homography._kernels import _SYM6, _jacobi_eigh  # the symmetric 9x9 eigen-solver, shared with the homography
 
 #: "infinite" path cost in the int16 path buffers; real path costs stay <= 255 + P2 <= 4351 (checked in disparity_sgm),
 #: so _BIG + P1 cannot overflow int16 and _BIG never wins a minimum
@@ -395,3 +399,872 @@ def _fill_background(disp):  # pragma: no cover - compiled
             elif right >= 0:
                 out[y, x] = right
     return out
+
+
+# ------------------------------------------------------------------------------------------------------------------
+# The fundamental matrix (:func:`cvpipe.stereo.epipolar.find_fundamental` validates, documents and calls them): the
+# Sampson distance and the MSAC cost of a model, the 7-point solver and the scoring of a batch of samples, the
+# weighted normalized 8-point solve from its accumulated 9x9 normal matrix, the rank-2 projection, and the
+# reweighting rounds of the final refinement. Models are (3, 3) arrays in pixel coordinates (``x2^T F x1 = 0``)
+# unless named ``Fn`` (Hartley-normalized coordinates, ``F = T2^T Fn T1``). Failures are status codes, never raised.
+
+#: smallest 7th pivot / 1st pivot of the eliminated 7x9 epipolar system (normalized coordinates) for a sample to
+#: count as regular (a repeated or collinear sample has rank below 7)
+_RANK_EPS = 1e-9
+#: a 7-point cubic whose leading coefficient is below this share of its largest one is skipped (F2 is a solution)
+_CUBIC_EPS = 1e-10
+#: the final refit weighs every correspondence by Tukey's biweight with at most this cut-off (in units of the
+#: threshold), as the homography's final refinement does: real matches have heavier tails than the threshold assumes
+_FINAL_WSCALE = 2.0
+#: ...and within it the cut-off is Tukey's 4.685 sigma (95 % efficiency under Gaussian noise) of the inliers' noise
+#: scale, ``sigma = 1.4826 * median`` of their Sampson distances. SIFT matches are heavy-tailed (on the Middlebury
+#: pairs the 90th percentile of the true residuals is 4 sigma, not 1.6), so a cut-off at the noise scale rather
+#: than at the threshold takes the tail's pull off the fit. ``_MIN_C`` keeps it from collapsing on exact data
+_TUKEY_C = 4.685
+_MAD_TO_SIGMA = 1.4826
+_MIN_C = 0.05
+#: rounds of Sampson-reweighted 8-point refitting of the final model
+_REFINE_ROUNDS = 10
+#: status of the 8-point solve: solved, fewer than 8 correspondences, rank-deficient normal matrix
+FM_OK = 0
+FM_TOO_FEW = 1
+FM_RANK_DEFICIENT = 2
+
+
+@njit(cache=True, error_model="numpy")
+def _epi(F, x, y, u, v):  # pragma: no cover - compiled
+    """(``x2^T F x1``, the squared norm of the first two entries of ``F x1`` and of ``F^T x2``) for x1 = (x, y, 1),
+    x2 = (u, v, 1): the Sampson distance is ``|num| / sqrt(den)``."""
+    a0 = F[0, 0] * x + F[0, 1] * y + F[0, 2]
+    a1 = F[1, 0] * x + F[1, 1] * y + F[1, 2]
+    a2 = F[2, 0] * x + F[2, 1] * y + F[2, 2]
+    b0 = F[0, 0] * u + F[1, 0] * v + F[2, 0]
+    b1 = F[0, 1] * u + F[1, 1] * v + F[2, 1]
+    return u * a0 + v * a1 + a2, a0 * a0 + a1 * a1 + b0 * b0 + b1 * b1
+
+
+@njit(cache=True, error_model="numpy")
+def _sq_sampson(F, p1, p2, i):  # pragma: no cover - compiled
+    """Squared Sampson distance of correspondence ``i`` (inf where the gradient vanishes)."""
+    num, den = _epi(F, p1[i, 0], p1[i, 1], p2[i, 0], p2[i, 1])
+    if den > 0.0:
+        return num * num / den
+    return np.inf
+
+
+@njit(cache=True, error_model="numpy")
+def sampson_distances(Fs, p1, p2, out):  # pragma: no cover - compiled
+    """``out[m, i]``: Sampson distance of correspondence i under ``Fs[m]`` (inf where the gradient vanishes)."""
+    for m in range(Fs.shape[0]):
+        F = Fs[m]
+        for i in range(p1.shape[0]):
+            num, den = _epi(F, p1[i, 0], p1[i, 1], p2[i, 0], p2[i, 1])
+            out[m, i] = abs(num) / np.sqrt(den) if den > 0.0 else np.inf
+    return out
+
+
+#: correspondences per block of the MSAC cost: the sum within a block is vectorized, the early exit is tested
+#: between blocks
+_COST_BLOCK = 64
+
+
+@njit(cache=True, error_model="numpy", fastmath={"reassoc"})
+def _msac_block(F, p1, p2, thr2, start, stop):  # pragma: no cover - compiled
+    """``sum_i min(d_i^2, thr2)`` for i in [start, stop) (reassociated: the loop runs on SIMD lanes)."""
+    f00, f01, f02 = F[0, 0], F[0, 1], F[0, 2]
+    f10, f11, f12 = F[1, 0], F[1, 1], F[1, 2]
+    f20, f21, f22 = F[2, 0], F[2, 1], F[2, 2]
+    c = 0.0
+    for i in range(start, stop):
+        x = p1[i, 0]
+        y = p1[i, 1]
+        u = p2[i, 0]
+        v = p2[i, 1]
+        a0 = f00 * x + f01 * y + f02
+        a1 = f10 * x + f11 * y + f12
+        a2 = f20 * x + f21 * y + f22
+        b0 = f00 * u + f10 * v + f20
+        b1 = f01 * u + f11 * v + f21
+        num = u * a0 + v * a1 + a2
+        den = a0 * a0 + a1 * a1 + b0 * b0 + b1 * b1
+        e = num * num / den if den > 0.0 else np.inf
+        c += e if e <= thr2 else thr2
+    return c
+
+
+@njit(cache=True, error_model="numpy")
+def _msac_from(F, p1, p2, thr2, block, cost, bail):  # pragma: no cover - compiled
+    """The MSAC cost of F given ``cost``, the sum over the blocks before ``block``; inf as soon as the partial sum
+    exceeds ``bail``."""
+    n = p1.shape[0]
+    for start in range(block * _COST_BLOCK, n, _COST_BLOCK):
+        cost += _msac_block(F, p1, p2, thr2, start, min(start + _COST_BLOCK, n))
+        if cost > bail:
+            return np.inf
+    return cost
+
+
+@njit(cache=True, error_model="numpy")
+def msac_cost(F, p1, p2, thr2, bail):  # pragma: no cover - compiled
+    """``sum_i min(d_i^2, thr2)`` over the Sampson distances d of F (summed by blocks of ``_COST_BLOCK``); inf as
+    soon as the partial sum exceeds ``bail`` (then F cannot be among the models the caller keeps; ``bail = inf``
+    gives the plain cost)."""
+    return _msac_from(F, p1, p2, thr2, 0, 0.0, bail)
+
+
+@njit(cache=True, error_model="numpy")
+def count_within(F, p1, p2, thr2, mask):  # pragma: no cover - compiled
+    """``mask[i]``: squared Sampson distance of i under F at most ``thr2``; returns the count."""
+    cnt = 0
+    for i in range(p1.shape[0]):
+        mask[i] = _sq_sampson(F, p1, p2, i) <= thr2
+        cnt += mask[i]
+    return cnt
+
+
+@njit(cache=True, error_model="numpy")
+def _matmul3(A, B, out):  # pragma: no cover - compiled
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
+
+
+@njit(cache=True, error_model="numpy")
+def denormalize(Fn, T1, T2, tmp, F):  # pragma: no cover - compiled
+    """``F = T2^T Fn T1`` (``tmp``: 3x3 scratch)."""
+    _matmul3(Fn, T1, tmp)
+    for i in range(3):
+        for j in range(3):
+            F[i, j] = T2[0, i] * tmp[0, j] + T2[1, i] * tmp[1, j] + T2[2, i] * tmp[2, j]
+
+
+@njit(cache=True, error_model="numpy")
+def unit(F):  # pragma: no cover - compiled
+    """Scale F in place to unit Frobenius norm with its largest entry (the first in row-major order) positive."""
+    s = 0.0
+    for i in range(3):
+        for j in range(3):
+            s += F[i, j] * F[i, j]
+    s = math.sqrt(s)
+    big = -1.0
+    sign = 1.0
+    for i in range(3):
+        for j in range(3):
+            F[i, j] /= s
+            if abs(F[i, j]) > big:
+                big = abs(F[i, j])
+                sign = 1.0 if F[i, j] >= 0.0 else -1.0
+    if sign < 0.0:
+        for i in range(3):
+            for j in range(3):
+                F[i, j] = -F[i, j]
+
+
+@njit(cache=True, error_model="numpy")
+def _rank2(F):  # pragma: no cover - compiled
+    """Project F in place onto the closest rank-2 matrix (Frobenius): ``F - F v v^T`` with v the right singular
+    vector of the smallest singular value (the eigenvector of ``F^T F`` of its smallest eigenvalue)."""
+    G = np.empty((3, 3))
+    W = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            G[i, j] = F[0, i] * F[0, j] + F[1, i] * F[1, j] + F[2, i] * F[2, j]
+    _jacobi_eigh(G, W)
+    v0, v1, v2 = W[0, 0], W[1, 0], W[2, 0]
+    for i in range(3):
+        f = F[i, 0] * v0 + F[i, 1] * v1 + F[i, 2] * v2
+        F[i, 0] -= f * v0
+        F[i, 1] -= f * v1
+        F[i, 2] -= f * v2
+
+
+@njit(cache=True, error_model="numpy")
+def _smallest_warm(M, V):  # pragma: no cover - compiled
+    """The eigenvector of the smallest eigenvalue of the symmetric 9x9 ``M`` into column 0 of ``V``, from ``V``
+    holding the eigenvectors of a similar matrix (the previous round of a reweighting loop); False when that could
+    not be verified (then ``V`` is an orthonormal basis still, and the caller decomposes ``M`` from scratch).
+
+    ``P = V^T M V`` is nearly diagonal; Jacobi rotations in the planes (0, q) only, with the convergence test of
+    :func:`cvpipe.homography._kernels._jacobi_eigh` on row 0, make row 0 of P diagonal, so that the rotated column
+    0 of V is an eigenvector of M (8 rotations per sweep instead of 36). It is the smallest one, and the rank test
+    of the 8-point solve passes, when Gershgorin's disc of row 0 lies below the discs of the other rows and these
+    lie above 1e-24 times the largest eigenvalue.
+    """
+    P = np.empty((9, 9))
+    tmp = np.empty((9, 9))
+    for i in range(9):
+        for j in range(9):
+            t = 0.0
+            for k in range(9):
+                t += M[i, k] * V[k, j]
+            tmp[i, j] = t
+    for i in range(9):
+        for j in range(i, 9):
+            t = 0.0
+            for k in range(9):
+                t += V[k, i] * tmp[k, j]
+            P[i, j] = t
+            P[j, i] = t
+    converged = False
+    for sweep in range(20):
+        off = 0.0
+        for q in range(1, 9):
+            off += P[0, q] * P[0, q]
+        diag = 0.0
+        for k in range(9):
+            diag += P[k, k] * P[k, k]
+        if off <= 1e-30 * diag or off == 0.0:
+            converged = True
+            break
+        for q in range(1, 9):
+            apq = P[0, q]
+            if apq == 0.0:
+                continue
+            theta = (P[q, q] - P[0, 0]) / (2.0 * apq)
+            tt = (1.0 if theta >= 0 else -1.0) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+            c = 1.0 / math.sqrt(tt * tt + 1.0)
+            s = tt * c
+            for k in range(9):
+                a0 = P[k, 0]
+                aq = P[k, q]
+                P[k, 0] = c * a0 - s * aq
+                P[k, q] = s * a0 + c * aq
+            for k in range(9):
+                a0 = P[0, k]
+                aq = P[q, k]
+                P[0, k] = c * a0 - s * aq
+                P[q, k] = s * a0 + c * aq
+            for k in range(9):
+                v0 = V[k, 0]
+                vq = V[k, q]
+                V[k, 0] = c * v0 - s * vq
+                V[k, q] = s * v0 + c * vq
+    if not converged:
+        return False
+    r0 = 0.0
+    for q in range(1, 9):
+        r0 += abs(P[0, q])
+    low = np.inf
+    high = P[0, 0] + r0
+    for k in range(1, 9):
+        r = 0.0
+        for j in range(9):
+            if j != k:
+                r += abs(P[k, j])
+        low = min(low, P[k, k] - r)
+        high = max(high, P[k, k] + r)
+    return P[0, 0] + r0 < low and low > 1e-24 * max(high, 1e-300)
+
+
+@njit(cache=True, error_model="numpy")
+def design_products(x1n, x2n, PT):  # pragma: no cover - compiled
+    """``PT[6 a + b, i] = q_a r_b`` for correspondence i, q = (u^2, uv, u, v^2, v, 1) of x2n = (u, v) and
+    r = (x^2, xy, x, y^2, y, 1) of x1n = (x, y): the normal matrix of the 8-point system with squared weights w2 is
+    ``PT @ w2`` (see :func:`eight_point_solve`). Computed once per point set, as the points do not change between
+    the reweighting rounds."""
+    for i in range(x1n.shape[0]):
+        x = x1n[i, 0]
+        y = x1n[i, 1]
+        u = x2n[i, 0]
+        v = x2n[i, 1]
+        r0, r1, r2, r3, r4 = x * x, x * y, x, y * y, y
+        for a in range(6):
+            if a == 0:
+                q = u * u
+            elif a == 1:
+                q = u * v
+            elif a == 2:
+                q = u
+            elif a == 3:
+                q = v * v
+            elif a == 4:
+                q = v
+            else:
+                q = 1.0
+            PT[6 * a, i] = q * r0
+            PT[6 * a + 1, i] = q * r1
+            PT[6 * a + 2, i] = q * r2
+            PT[6 * a + 3, i] = q * r3
+            PT[6 * a + 4, i] = q * r4
+            PT[6 * a + 5, i] = q
+    return PT
+
+
+@njit(cache=True, error_model="numpy", fastmath={"reassoc"})
+def _normal_sums(PT, w2, S):  # pragma: no cover - compiled
+    """``S = PT @ w2``: 36 dot products, each vectorized (reassociated)."""
+    n = w2.shape[0]
+    for k in range(36):
+        t = 0.0
+        for i in range(n):
+            t += PT[k, i] * w2[i]
+        S[k] = t
+
+
+@njit(cache=True, error_model="numpy")
+def eight_point_solve(PT, w2, count, Fn, V, warm):  # pragma: no cover - compiled
+    """Weighted normalized 8-point: ``Fn`` becomes the rank-2 projection of the null vector of ``A^T A``, A the rows
+    of ``x2^T F x1`` times the weights, whose squares are ``w2`` (0 for the correspondences left out; ``count``:
+    the rows used). Returns a status (``FM_*``).
+
+    ``A^T A = sum_i w2_i (x2 x2^T) kron (x1 x1^T)``: the 6 distinct products of x2 times the 6 of x1, 36 sums
+    (``PT`` from :func:`design_products`) instead of the 45 of the symmetric 9x9 outer product. Its eigenvectors go
+    to the columns of ``V`` (9, 9); with ``warm``, ``V`` holds those of a similar system (the previous round of a
+    reweighting loop) and only the smallest one is refined (:func:`_smallest_warm`), with the full decomposition
+    when that fails.
+    """
+    if count < 8:
+        return FM_TOO_FEW
+    S = np.empty(36)
+    _normal_sums(PT, w2, S)
+    # entry (3a + b, 3c + d) of the 9x9 matrix is sum w^2 x2_a x2_c x1_b x1_d
+    M = np.empty((9, 9))
+    for a in range(3):
+        for b in range(3):
+            for c in range(3):
+                for d in range(3):
+                    M[3 * a + b, 3 * c + d] = S[6 * _SYM6[a, c] + _SYM6[b, d]]
+    if not (warm and _smallest_warm(M, V)):
+        ev = _jacobi_eigh(M, V)
+        if ev[1] <= 1e-24 * max(ev[8], 1e-300):
+            return FM_RANK_DEFICIENT
+    for k in range(9):
+        Fn[k // 3, k % 3] = V[k, 0]
+    _rank2(Fn)
+    return FM_OK
+
+
+@njit(cache=True, error_model="numpy")
+def _sample7(u, n, pick, chosen):  # pragma: no cover - compiled
+    """Seven distinct indices in [0, n) into ``pick`` from seven uniforms in [0, 1): exact sampling without
+    replacement (the j-th index is uniform over the n - j values not chosen yet: draw in [0, n - j) and walk it past
+    the chosen indices, kept sorted in ``chosen``)."""
+    for j in range(7):
+        r = min(int(u[j] * (n - j)), n - j - 1)
+        t = 0
+        while t < j and r >= chosen[t]:
+            r += 1
+            t += 1
+        for s in range(j, t, -1):
+            chosen[s] = chosen[s - 1]
+        chosen[t] = r
+        pick[j] = r
+
+
+@njit(cache=True, error_model="numpy")
+def _null2(A, F1, F2, perm):  # pragma: no cover - compiled
+    """An orthonormal basis (F1, F2) of the null space of the 7x9 system A (overwritten), by Gauss-Jordan
+    elimination with full pivoting; False when A has rank below 7 (7th pivot below ``_RANK_EPS`` of the 1st).
+    ``perm``: (9,) int64 scratch."""
+    for j in range(9):
+        perm[j] = j
+    first = 0.0
+    for r in range(7):
+        big = 0.0
+        pi = r
+        pj = r
+        for i in range(r, 7):
+            for j in range(r, 9):
+                if abs(A[i, j]) > big:
+                    big = abs(A[i, j])
+                    pi = i
+                    pj = j
+        if r == 0:
+            first = big
+        if not big > _RANK_EPS * first or big == 0.0:
+            return False
+        if pi != r:
+            for j in range(9):
+                t = A[r, j]
+                A[r, j] = A[pi, j]
+                A[pi, j] = t
+        if pj != r:
+            for i in range(7):
+                t = A[i, r]
+                A[i, r] = A[i, pj]
+                A[i, pj] = t
+            t = perm[r]
+            perm[r] = perm[pj]
+            perm[pj] = t
+        inv = 1.0 / A[r, r]
+        for j in range(r, 9):
+            A[r, j] *= inv
+        for i in range(7):
+            if i != r:
+                f = A[i, r]
+                if f != 0.0:
+                    for j in range(r, 9):
+                        A[i, j] -= f * A[r, j]
+    # A = [I | B] in the permuted columns: null vectors x[perm[7 + k]] = 1 (the other free one 0), x[perm[i]] = -B[i, k]
+    for k in range(2):
+        F = F1 if k == 0 else F2
+        for i in range(7):
+            c = perm[i]
+            F[c // 3, c % 3] = -A[i, 7 + k]
+        c = perm[7 + k]
+        F[c // 3, c % 3] = 1.0
+        c = perm[8 - k]
+        F[c // 3, c % 3] = 0.0
+    # Gram-Schmidt: F1 unit, F2 unit and orthogonal to it
+    s = 0.0
+    for i in range(3):
+        for j in range(3):
+            s += F1[i, j] * F1[i, j]
+    s = 1.0 / math.sqrt(s)
+    dot = 0.0
+    for i in range(3):
+        for j in range(3):
+            F1[i, j] *= s
+            dot += F1[i, j] * F2[i, j]
+    s = 0.0
+    for i in range(3):
+        for j in range(3):
+            F2[i, j] -= dot * F1[i, j]
+            s += F2[i, j] * F2[i, j]
+    s = 1.0 / math.sqrt(s)
+    for i in range(3):
+        for j in range(3):
+            F2[i, j] *= s
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _det3(F):  # pragma: no cover - compiled
+    return (F[0, 0] * (F[1, 1] * F[2, 2] - F[1, 2] * F[2, 1]) - F[0, 1] * (F[1, 0] * F[2, 2] - F[1, 2] * F[2, 0])
+            + F[0, 2] * (F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0]))
+
+
+@njit(cache=True, error_model="numpy")
+def _cof_dot(A, B):  # pragma: no cover - compiled
+    """``sum_ij cof(A)_ij B_ij`` (= trace(adj(A) B)): the coefficient of t in det(A + t B)."""
+    return (B[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]) - B[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
+            + B[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]) - B[1, 0] * (A[0, 1] * A[2, 2] - A[0, 2] * A[2, 1])
+            + B[1, 1] * (A[0, 0] * A[2, 2] - A[0, 2] * A[2, 0]) - B[1, 2] * (A[0, 0] * A[2, 1] - A[0, 1] * A[2, 0])
+            + B[2, 0] * (A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1]) - B[2, 1] * (A[0, 0] * A[1, 2] - A[0, 2] * A[1, 0])
+            + B[2, 2] * (A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]))
+
+
+@njit(cache=True, error_model="numpy")
+def _polish(c3, c2, c1, c0, x):  # pragma: no cover - compiled
+    """Newton steps on c3 x^3 + c2 x^2 + c1 x + c0 (the coefficients as given: dividing by a small c3 would lose
+    the small roots), each kept only while it lowers |p(x)|; returns (x, |p(x)| / its rounding scale)."""
+    f = ((c3 * x + c2) * x + c1) * x + c0
+    for _ in range(4):
+        fp = (3.0 * c3 * x + 2.0 * c2) * x + c1
+        if fp == 0.0 or f == 0.0:
+            break
+        xn = x - f / fp
+        fn = ((c3 * xn + c2) * xn + c1) * xn + c0
+        if not abs(fn) < abs(f):
+            break
+        x = xn
+        f = fn
+    ax = abs(x)
+    scale = ((abs(c3) * ax + abs(c2)) * ax + abs(c1)) * ax + abs(c0)
+    return x, abs(f) / scale if scale > 0.0 else 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def _cubic_roots(c3, c2, c1, c0, out):  # pragma: no cover - compiled
+    """The real roots of c3 a^3 + c2 a^2 + c1 a + c0 into ``out``, their number (0 when the cubic degenerates:
+    ``|c3|`` at most ``_CUBIC_EPS`` of the largest coefficient).
+
+    The real root of largest magnitude from the closed form of the monic cubic (Cardano, or the trigonometric form
+    for three real roots: accurate for the largest root, not for much smaller ones), refined by Newton on the given
+    coefficients; then the quadratic factor of the other two, deflated from the side that keeps it accurate
+    (backward from the constant term when the root is the larger one), solved in the stable form. A complex pair
+    whose imaginary part is within 1e-8 of its modulus (at least 1) counts as one real (double) root, as for the
+    eigenvalues of the companion matrix."""
+    scale = max(abs(c3), abs(c2), abs(c1), abs(c0))
+    if not (scale > 0.0 and abs(c3) > _CUBIC_EPS * scale):
+        return 0
+    b = c2 / c3
+    c = c1 / c3
+    d = c0 / c3
+    # depressed cubic t^3 + p t + q = 0 with a = t - b / 3
+    b3 = b / 3.0
+    p = c - b * b3
+    q = (2.0 * b3 * b3 - c) * b3 + d
+    hq = 0.5 * q
+    tp = p / 3.0
+    disc = hq * hq + tp * tp * tp
+    if disc > 0.0:
+        s = math.sqrt(disc)
+        w = -hq - s if hq >= 0.0 else -hq + s  # no cancellation
+        A = math.copysign(abs(w) ** (1.0 / 3.0), w)
+        r = A + (-tp / A if A != 0.0 else 0.0) - b3
+    elif tp == 0.0:  # then q = 0 too: a triple root
+        r = -b3
+    else:
+        rad = 2.0 * math.sqrt(-tp)
+        phi = math.acos(min(1.0, max(-1.0, hq / (tp * math.sqrt(-tp))))) / 3.0
+        r = 0.0
+        for m in range(3):
+            t = rad * math.cos(phi - 2.0 * math.pi * m / 3.0) - b3
+            if m == 0 or abs(t) > abs(r):
+                r = t
+    r, _ = _polish(c3, c2, c1, c0, r)
+    out[0] = r
+    # (a - r)(q2 a^2 + q1 a + q0)
+    if r != 0.0 and abs(c3) * abs(r) ** 3 >= abs(c0):  # r is larger than the geometric mean of the other two
+        q0 = -c0 / r
+        q1 = (q0 - c1) / r
+        q2 = (q1 - c2) / r
+    else:
+        q2 = c3
+        q1 = c2 + r * q2
+        q0 = c1 + r * q1
+    if q2 == 0.0:
+        return 1
+    dq = q1 * q1 - 4.0 * q2 * q0
+    if dq < 0.0:
+        re = -q1 / (2.0 * q2)
+        im = math.sqrt(-dq) / (2.0 * abs(q2))
+        if im <= 1e-8 * max(1.0, math.sqrt(re * re + im * im)):
+            out[1], _ = _polish(c3, c2, c1, c0, re)
+            return 2
+        return 1
+    h = -0.5 * (q1 + math.copysign(math.sqrt(dq), q1))
+    if h == 0.0:  # q1 = q0 = 0: a double root at 0
+        out[1] = 0.0
+        return 2
+    out[1], _ = _polish(c3, c2, c1, c0, h / q2)
+    out[2], _ = _polish(c3, c2, c1, c0, q0 / h)
+    return 3
+
+
+@njit(cache=True, error_model="numpy")
+def seven_point(x1n, x2n, pick, Fns, A, F1, F2, D, roots, perm):  # pragma: no cover - compiled
+    """The fundamental matrices (normalized coordinates) through the 7 correspondences ``pick`` into ``Fns``
+    (3, 3, 3); returns their number, 0 for a degenerate sample.
+
+    The 1 to 3 real roots a of ``det(a F1 + (1 - a) F2) = 0`` over the null space (F1, F2) of the 7x9 system.
+    Scratch (none allocated per sample): ``A`` (7, 9), ``F1, F2, D`` (3, 3), ``roots`` (3,), ``perm`` (9,) int64.
+    """
+    for r in range(7):
+        i = pick[r]
+        x, y, xp, yp = x1n[i, 0], x1n[i, 1], x2n[i, 0], x2n[i, 1]
+        A[r, 0] = xp * x
+        A[r, 1] = xp * y
+        A[r, 2] = xp
+        A[r, 3] = yp * x
+        A[r, 4] = yp * y
+        A[r, 5] = yp
+        A[r, 6] = x
+        A[r, 7] = y
+        A[r, 8] = 1.0
+    if not _null2(A, F1, F2, perm):
+        return 0
+    for i in range(3):
+        for j in range(3):
+            D[i, j] = F1[i, j] - F2[i, j]
+    # det(a F1 + (1 - a) F2) = det(F2 + a D)
+    nr = _cubic_roots(_det3(D), _cof_dot(D, F2), _cof_dot(F2, D), _det3(F2), roots)
+    for r in range(nr):
+        a = roots[r]
+        for i in range(3):
+            for j in range(3):
+                Fns[r, i, j] = F2[i, j] + a * D[i, j]
+    return nr
+
+
+@njit(cache=True, error_model="numpy")
+def ransac_batch(u, x1n, x2n, p1, p2, T1, T2, thr2, keep, models, costs):  # pragma: no cover - compiled
+    """Solve (:func:`seven_point`) and score the 7-point samples drawn from the uniforms ``u`` (K, 7).
+
+    Each solution goes to ``models`` in pixel coordinates with its MSAC cost in ``costs``. A model whose partial
+    cost already exceeds the ``keep``-th lowest cost of the batch is not finished (cost inf): it cannot be among the
+    lowest ``keep``, which is all the caller keeps. To find those early, every model is first scored on the first
+    block of correspondences and the models are finished in the order of those partial costs; the finished costs do
+    not depend on that order. Returns (models, samples that gave a model).
+    """
+    n = p1.shape[0]
+    pick = np.empty(7, np.int64)
+    chosen = np.empty(7, np.int64)
+    Fns = np.empty((3, 3, 3))
+    tmp = np.empty((3, 3))
+    A = np.empty((7, 9))
+    F1 = np.empty((3, 3))
+    F2 = np.empty((3, 3))
+    D = np.empty((3, 3))
+    roots = np.empty(3)
+    perm = np.empty(9, np.int64)
+    m = 0
+    regular = 0
+    for k in range(u.shape[0]):
+        _sample7(u[k], n, pick, chosen)
+        nr = seven_point(x1n, x2n, pick, Fns, A, F1, F2, D, roots, perm)
+        if nr == 0:
+            continue
+        regular += 1
+        for r in range(nr):
+            F = models[m]
+            denormalize(Fns[r], T1, T2, tmp, F)
+            costs[m] = _msac_block(F, p1, p2, thr2, 0, min(_COST_BLOCK, n))
+            m += 1
+    low = np.full(keep, np.inf)  # the lowest costs of the batch so far, ascending
+    for j in np.argsort(costs[:m]):
+        cost = _msac_from(models[j], p1, p2, thr2, 1, costs[j], low[keep - 1])
+        costs[j] = cost
+        if cost < low[keep - 1]:
+            t = keep - 1
+            while t > 0 and low[t - 1] > cost:
+                low[t] = low[t - 1]
+                t -= 1
+            low[t] = cost
+    return m, regular
+
+
+@njit(cache=True, error_model="numpy")
+def _kth(a, n, k):  # pragma: no cover - compiled
+    """Rearrange ``a[:n]`` so that ``a[k]`` is its k-th smallest value (0-based) with no larger value before it and
+    no smaller one after it (Hoare's selection with Wirth's partition); returns ``a[k]``."""
+    lo = 0
+    hi = n - 1
+    while lo < hi:
+        pivot = a[(lo + hi) // 2]
+        i = lo
+        j = hi
+        while i <= j:
+            while a[i] < pivot:
+                i += 1
+            while pivot < a[j]:
+                j -= 1
+            if i <= j:
+                t = a[i]
+                a[i] = a[j]
+                a[j] = t
+                i += 1
+                j -= 1
+        if j < k:
+            lo = i
+        if k < i:
+            hi = j
+    return a[k]
+
+
+@njit(cache=True, error_model="numpy")
+def noise_cutoff(d, threshold, buf, squared):  # pragma: no cover - compiled
+    """Tukey's cut-off ``_TUKEY_C * sigma`` for Sampson distances ``d`` (their squares with ``squared``),
+    ``sigma = _MAD_TO_SIGMA * median`` of the distances within ``threshold`` (``threshold`` when there are none),
+    kept within ``[_MIN_C, _FINAL_WSCALE]`` times ``threshold``; ``buf``: scratch of len(d)."""
+    k = 0
+    t = threshold * threshold if squared else threshold
+    for i in range(d.shape[0]):
+        if d[i] <= t:
+            buf[k] = d[i]
+            k += 1
+    if k == 0:
+        sigma = threshold
+    else:
+        h = k // 2
+        med = _kth(buf, k, h)
+        if squared:
+            med = math.sqrt(med)
+        if k % 2 == 0:  # the mean of the two middle values: the largest of the lower half is the other one
+            lower = buf[0]
+            for i in range(1, h):
+                lower = max(lower, buf[i])
+            med = ((math.sqrt(lower) if squared else lower) + med) / 2.0
+        sigma = _MAD_TO_SIGMA * med
+    return min(_FINAL_WSCALE * threshold, max(_TUKEY_C * sigma, _MIN_C * threshold))
+
+
+@njit(cache=True, error_model="numpy")
+def refit(PT, p1, p2, T1, T2, mask, rounds, w2, F, V, warm):  # pragma: no cover - compiled
+    """Sampson-reweighted normalized 8-point on ``mask`` (``rounds`` reweightings; ``w2``: scratch of len(p1)): F
+    in pixel coordinates, unit norm. ``PT``, ``V``, ``warm``: as for :func:`eight_point_solve`. Returns a status
+    (``FM_*``)."""
+    Fn = np.empty((3, 3))
+    tmp = np.empty((3, 3))
+    n = p1.shape[0]
+    cnt = 0
+    for i in range(n):
+        w2[i] = 1.0 if mask[i] else 0.0
+        cnt += mask[i]
+    status = eight_point_solve(PT, w2, cnt, Fn, V, warm)
+    if status != FM_OK:
+        return status
+    for _ in range(rounds):
+        denormalize(Fn, T1, T2, tmp, F)
+        # algebraic residual / its gradient norm = Sampson distance: squared weight 1 / den (the normalization
+        # changes the algebraic scale by a constant factor only, and a common scale of the weights changes no
+        # eigenvector)
+        for i in range(n):
+            if mask[i]:
+                _, den = _epi(F, p1[i, 0], p1[i, 1], p2[i, 0], p2[i, 1])
+                w2[i] = 1.0 / max(den, 1e-300)
+        status = eight_point_solve(PT, w2, cnt, Fn, V, True)
+        if status != FM_OK:
+            return status
+    denormalize(Fn, T1, T2, tmp, F)
+    unit(F)
+    return FM_OK
+
+
+@njit(cache=True, error_model="numpy")
+def refit_robust(PT, p1, p2, T1, T2, F, threshold, rounds, d2, iden, w2, use, buf, V, warm):  # pragma: no cover
+    """Iteratively reweighted 8-point of F (in place) over every correspondence, weights ``Tukey(d / c) / sqrt(den)``
+    with the cut-off c of :func:`noise_cutoff` re-estimated each round; stops early when fewer than 8 fall within
+    it. Works on squared distances and weights (no square root per correspondence). ``d2, iden, w2, use, buf``:
+    scratch of len(p1); ``V``, ``warm``: as for :func:`refit`. Returns a status (``FM_*``)."""
+    Fn = np.empty((3, 3))
+    tmp = np.empty((3, 3))
+    n = p1.shape[0]
+    for _ in range(rounds):
+        for i in range(n):
+            num, de = _epi(F, p1[i, 0], p1[i, 1], p2[i, 0], p2[i, 1])
+            r = 1.0 / max(de, 1e-300)
+            iden[i] = r
+            d2[i] = num * num * r
+        c = noise_cutoff(d2, threshold, buf, True)
+        c2 = c * c
+        cnt = 0
+        for i in range(n):
+            use[i] = d2[i] < c2
+            cnt += use[i]
+        if cnt < 8:
+            break
+        for i in range(n):
+            t = 1.0 - d2[i] / c2
+            t *= t
+            w2[i] = t * t * iden[i] if use[i] else 0.0
+        status = eight_point_solve(PT, w2, cnt, Fn, V, warm)
+        if status != FM_OK:
+            return status
+        warm = True
+        denormalize(Fn, T1, T2, tmp, F)
+        unit(F)
+    return FM_OK
+
+
+@njit(cache=True, error_model="numpy")
+def local_optimize(PT, p1, p2, T1, T2, F0, thr2, F):  # pragma: no cover - compiled
+    """LO of a new so-far-best model: the unweighted 8-point model F of the correspondences within the threshold
+    of F0. Returns (ok, MSAC cost of F)."""
+    n = p1.shape[0]
+    mask = np.empty(n, np.bool_)
+    if count_within(F0, p1, p2, thr2, mask) < 8:
+        return False, np.inf
+    if refit(PT, p1, p2, T1, T2, mask, 0, np.empty(n), F, np.empty((9, 9)), False) != FM_OK:
+        return False, np.inf
+    return True, msac_cost(F, p1, p2, thr2, np.inf)
+
+
+@njit(cache=True, error_model="numpy")
+def _finish(PT, p1, p2, T1, T2, F, threshold, min_inliers, d, den, w, use, buf, mask, new, V):  # pragma: no cover
+    """The final refinement of one model (F in place): reweighted 8-point refits with inlier re-selection, then the
+    robust refit. Returns a status (``FM_*``)."""
+    thr2 = threshold * threshold
+    count_within(F, p1, p2, thr2, mask)
+    warm = False
+    for _ in range(2):  # refit, re-select inliers, refit (the inlier set settles in one or two rounds)
+        status = refit(PT, p1, p2, T1, T2, mask, _REFINE_ROUNDS, w, F, V, warm)
+        warm = True
+        if status != FM_OK:
+            return status
+        cnt = count_within(F, p1, p2, thr2, new)
+        same = True
+        for i in range(p1.shape[0]):
+            if new[i] != mask[i]:
+                same = False
+                break
+        if cnt < min_inliers or same:
+            break
+        mask[:] = new
+    if _FINAL_WSCALE > 0:
+        return refit_robust(PT, p1, p2, T1, T2, F, threshold, _REFINE_ROUNDS, d, den, w, use, buf, V, True)
+    return FM_OK
+
+
+@njit(cache=True, error_model="numpy")
+def _same(A, B):  # pragma: no cover - compiled
+    for i in range(3):
+        for j in range(3):
+            if A[i, j] != B[i, j]:
+                return False
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def final_refinement(PT, p1, p2, T1, T2, starts, threshold, sel2, min_inliers, quick_rounds, full,
+                     F):  # pragma: no cover - compiled
+    """The multi-start final refinement: each start gets ``quick_rounds`` robust rounds, the ``full`` lowest of
+    those (MSAC cost truncated at ``sel2``; ties in the order of ``starts``) get the whole refinement
+    (:func:`_finish`), and the lowest cost wins into F. Returns False when every start failed."""
+    n = p1.shape[0]
+    d = np.empty(n)
+    den = np.empty(n)
+    w = np.empty(n)
+    buf = np.empty(n)
+    use = np.empty(n, np.bool_)
+    mask = np.empty(n, np.bool_)
+    new = np.empty(n, np.bool_)
+    V = np.empty((9, 9))
+    s = starts.shape[0]
+    quick = np.empty((s, 3, 3))
+    qcost = np.full(s, np.inf)
+    for k in range(s):
+        quick[k] = starts[k]
+        if refit_robust(PT, p1, p2, T1, T2, quick[k], threshold, quick_rounds, d, den, w, use, buf, V,
+                        False) == FM_OK:
+            qcost[k] = msac_cost(quick[k], p1, p2, sel2, np.inf)
+    order = np.argsort(qcost, kind="mergesort")
+    cand = np.empty((3, 3))
+    best = np.inf
+    found = False
+    for t in range(min(full, s)):
+        k = order[t]
+        if not qcost[k] < np.inf:
+            break
+        if t > 0 and _same(quick[k], quick[order[t - 1]]):
+            continue  # the same start as the previous one (a model that is both a so-far-best and in the pool)
+        cand[:, :] = quick[k]
+        if _finish(PT, p1, p2, T1, T2, cand, threshold, min_inliers, d, den, w, use, buf, mask, new,
+                   V) != FM_OK:
+            continue
+        c = msac_cost(cand, p1, p2, sel2, np.inf)
+        if c < best:
+            best = c
+            F[:, :] = cand
+            found = True
+    return found
+
+
+@njit(cache=True, error_model="numpy")
+def normalize_points(p, eps, T, out):  # pragma: no cover - compiled
+    """Hartley normalization of the (N, 2) points ``p`` in one pass over them: ``T`` (3, 3) moves their centroid to
+    the origin and their mean distance to it to sqrt(2), ``out`` (N, 2) gets the normalized points. Returns False,
+    and leaves both untouched, when the points are collinear or coincide: the smaller principal axis of the centred
+    points is at most ``eps`` times the larger one (as :func:`cvpipe.geometry.collinear`, from the 2x2 scatter
+    matrix instead of an SVD: its eigenvalue ratio at most eps^2)."""
+    n = p.shape[0]
+    cx = 0.0
+    cy = 0.0
+    for i in range(n):
+        cx += p[i, 0]
+        cy += p[i, 1]
+    cx /= n
+    cy /= n
+    a = b = c = dist = 0.0
+    for i in range(n):
+        x = p[i, 0] - cx
+        y = p[i, 1] - cy
+        a += x * x
+        b += x * y
+        c += y * y
+        dist += math.sqrt(x * x + y * y)
+    l0 = 0.5 * (a + c) + math.sqrt(0.25 * (a - c) ** 2 + b * b)
+    if not l0 > 0.0 or a * c - b * b <= eps * eps * l0 * l0:
+        return False
+    s = math.sqrt(2.0) / (dist / n)
+    T[:, :] = 0.0
+    T[0, 0] = s
+    T[1, 1] = s
+    T[0, 2] = -s * cx
+    T[1, 2] = -s * cy
+    T[2, 2] = 1.0
+    for i in range(n):
+        out[i, 0] = (p[i, 0] - cx) * s
+        out[i, 1] = (p[i, 1] - cy) * s
+    return True

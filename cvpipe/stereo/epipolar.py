@@ -5,7 +5,8 @@
 has rank 2, and a correspondence is an inlier when its Sampson distance (the first-order geometric distance of the
 pair to the epipolar variety, in pixels) is at most ``threshold``. The pipeline is
 
-1. Hartley normalization of both point sets (``cvpipe.geometry.hartley_normalization``);
+1. Hartley normalization of both point sets (as ``cvpipe.geometry.hartley_normalization``, in one pass with the
+   test that they are not all on one line);
 2. RANSAC over minimal 7-point samples, solved in batches: the 2-D null space of the 7x9 epipolar system, then the
    one to three real roots of the cubic ``det(a F1 + (1 - a) F2) = 0``; samples whose system has rank below 7
    (repeated or collinear points) are skipped. Hypotheses are scored by MSAC (truncated squared Sampson distance)
@@ -22,8 +23,10 @@ pair to the epipolar variety, in pixels) is at most ``threshold``. The pipeline 
    homography explains as well as ``F`` (a planar scene, or a pure rotation with no baseline), where ``F`` is not
    determined; each raises :class:`cvpipe.errors.EstimationError` saying what to change.
 
-Everything is vectorized numpy (a batch of samples is solved and scored at once): a numba kernel did not pay, as the
-work per hypothesis is a handful of small SVDs and one pass over the points.
+The loops are numba kernels (:mod:`cvpipe.stereo._kernels`): the 7-point solve and MSAC scoring of a batch of
+samples, the Sampson distances, the 8-point solve from the accumulated 9x9 normal matrix with the rank-2 projection,
+and the reweighting rounds of the final refinement (with the median of the noise scale); this module draws the
+samples, keeps the so-far-best models and the starts of the final refinement, and raises the errors.
 """
 
 from __future__ import annotations
@@ -34,8 +37,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import EstimationError, InputError, check_int
-from ..geometry import as_points, collinear, hartley_normalization
+from ..geometry import as_points, hartley_normalization
 from ..params import StereoRectifyParams
+from . import _kernels as K
+from ._kernels import _FINAL_WSCALE, _MAD_TO_SIGMA, _MIN_C, _RANK_EPS, _REFINE_ROUNDS, _TUKEY_C  # noqa: F401
 
 #: default iteration cap of :func:`find_fundamental` (7-point samples; ~65 % outliers at confidence 0.999)
 DEFAULT_MAX_ITERS = 5_000
@@ -43,22 +48,11 @@ DEFAULT_MAX_ITERS = 5_000
 _BATCH = 64
 #: the ``stereo.rectify`` defaults: the one declaration of :func:`find_fundamental`'s ``threshold``
 _RECTIFY = StereoRectifyParams()
-#: smallest sigma_7 / sigma_1 of a 7-point system in normalized coordinates for the sample to count as regular
-_RANK_EPS = 1e-9
 #: relative size of the smaller principal axis below which a whole point set counts as collinear
 _ALL_COLLINEAR_EPS = 1e-6
-#: rounds of Sampson-reweighted 8-point refitting of the final model
-_REFINE_ROUNDS = 10
-#: the final refit weighs every correspondence by Tukey's biweight with at most this cut-off (in units of the
-#: threshold), as the homography's final refinement does: real matches have heavier tails than the threshold assumes
-_FINAL_WSCALE = 2.0
-#: ...and within it the cut-off is Tukey's 4.685 sigma (95 % efficiency under Gaussian noise) of the inliers' noise
-#: scale, ``sigma = 1.4826 * median`` of their Sampson distances. SIFT matches are heavy-tailed (on the Middlebury
-#: pairs the 90th percentile of the true residuals is 4 sigma, not 1.6), so a cut-off at the noise scale rather
-#: than at the threshold takes the tail's pull off the fit. ``_MIN_C`` keeps it from collapsing on exact data
-_TUKEY_C = 4.685
-_MAD_TO_SIGMA = 1.4826
-_MIN_C = 0.05
+#: the rank test of a 7-point sample (``_RANK_EPS``), the rounds of the final refit (``_REFINE_ROUNDS``) and its
+#: Tukey cut-off (``_FINAL_WSCALE``, ``_TUKEY_C``, ``_MAD_TO_SIGMA``, ``_MIN_C``) are declared beside the kernels
+#: that use them, in :mod:`cvpipe.stereo._kernels`
 #: RANSAC models that each get the final refinement (the most recent so-far-best ones and the lowest-cost ones
 #: of the whole run, a few per batch), the lowest final cost wins; and the fewest samples drawn. With little depth
 #: variation the cost is flat along the epipole's distance and the refinement has several basins: on an
@@ -105,7 +99,8 @@ class FundamentalFit:
 # ----------------------------------------------------------------------------------------------- validation
 
 
-def _check_pair(pts1, pts2, minimum: int) -> tuple[np.ndarray, np.ndarray]:
+def _check_pair(pts1, pts2, minimum: int):
+    """(p1, p2, T1, T2, x1n, x2n): the validated points, their Hartley normalizations and the normalized points."""
     p1, p2 = as_points("pts1", pts1), as_points("pts2", pts2)
     if len(p1) != len(p2):
         raise InputError(f"`pts1` and `pts2` must have the same number of points, got {len(p1)} and {len(p2)}")
@@ -113,27 +108,19 @@ def _check_pair(pts1, pts2, minimum: int) -> tuple[np.ndarray, np.ndarray]:
         raise EstimationError(
             f"a fundamental matrix needs at least {minimum} correspondences, got {len(p1)}: the views share too "
             "little (more overlap, more features or a looser ratio test)")
+    normalized = []
     for name, p in (("pts1", p1), ("pts2", p2)):
-        if collinear(p, _ALL_COLLINEAR_EPS):
+        T, x = np.empty((3, 3)), np.empty_like(p)
+        if not K.normalize_points(p, _ALL_COLLINEAR_EPS, T, x):
             raise EstimationError(
                 f"all `{name}` points are collinear or coincident, so the fundamental matrix is undetermined; "
                 "supply correspondences spread over the image")
-    return p1, p2
+        normalized.append((T, x))
+    (T1, x1n), (T2, x2n) = normalized
+    return p1, p2, T1, T2, x1n, x2n
 
 
 # ------------------------------------------------------------------------------------------------ solvers
-
-
-def _hom(p: np.ndarray) -> np.ndarray:
-    return np.column_stack([p, np.ones(len(p))])
-
-
-def _design(x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
-    """Rows of the linear system ``A f = 0`` for ``x2^T F x1 = 0`` (F row-major); works on (..., N, 2) arrays."""
-    u, v = x1[..., 0], x1[..., 1]
-    up, vp = x2[..., 0], x2[..., 1]
-    one = np.ones_like(u)
-    return np.stack([up * u, up * v, up, vp * u, vp * v, vp, u, v, one], axis=-1)
 
 
 def enforce_rank2(F: np.ndarray) -> np.ndarray:
@@ -143,26 +130,33 @@ def enforce_rank2(F: np.ndarray) -> np.ndarray:
 
 
 def _unit(F: np.ndarray) -> np.ndarray:
-    n = np.linalg.norm(F)
-    F = F / n
-    # a fixed sign for a reproducible representative: the largest entry positive
-    k = np.argmax(np.abs(F))
-    return F if F.flat[k] >= 0 else -F
+    """F scaled to unit Frobenius norm, a fixed sign for a reproducible representative: the largest entry positive."""
+    F = np.array(F, dtype=np.float64)
+    K.unit(F)
+    return F
+
+
+_SOLVE_ERRORS = {
+    K.FM_TOO_FEW: "the 8-point system needs at least 8 correspondences",
+    K.FM_RANK_DEFICIENT: ("the 8-point system is rank-deficient (degenerate configuration); supply more "
+                          "correspondences spread over the image and over depth"),
+}
+
+
+def _products(x1n: np.ndarray, x2n: np.ndarray) -> np.ndarray:
+    """The (36, N) products of the 8-point system's monomials (:func:`cvpipe.stereo._kernels.design_products`)."""
+    return K.design_products(x1n, x2n, np.empty((36, len(x1n))))
 
 
 def _eight_point_normalized(x1n: np.ndarray, x2n: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
-    A = _design(x1n, x2n)
-    if len(A) < 8:
-        raise EstimationError("the 8-point system needs at least 8 correspondences")
-    if w is not None:
-        A = A * w[:, None]
     # the null vector of A from the 9x9 normal matrix (Hartley normalization keeps it well conditioned): an
-    # eigen-decomposition of 9x9 instead of an SVD of N x 9, ~10x faster for a thousand points
-    ev, V = np.linalg.eigh(A.T @ A)
-    if ev[1] <= 1e-24 * max(ev[-1], 1e-300):
-        raise EstimationError("the 8-point system is rank-deficient (degenerate configuration); "
-                              "supply more correspondences spread over the image and over depth")
-    return enforce_rank2(V[:, 0].reshape(3, 3))
+    # eigen-decomposition of 9x9 instead of an SVD of N x 9
+    Fn = np.empty((3, 3))
+    status = K.eight_point_solve(_products(x1n, x2n), np.ones(len(x1n)) if w is None else w * w, len(x1n), Fn,
+                                 np.empty((9, 9)), False)
+    if status != K.FM_OK:
+        raise EstimationError(_SOLVE_ERRORS[status])
+    return Fn
 
 
 def eight_point(pts1, pts2, weights=None) -> np.ndarray:
@@ -190,14 +184,13 @@ def eight_point(pts1, pts2, weights=None) -> np.ndarray:
     EstimationError
         Fewer than 8 points, all points collinear, or a rank-deficient system.
     """
-    p1, p2 = _check_pair(pts1, pts2, 8)
+    p1, p2, T1, T2, x1n, x2n = _check_pair(pts1, pts2, 8)
     w = None
     if weights is not None:
         w = np.asarray(weights, dtype=np.float64)
         if w.shape != (len(p1),) or not np.isfinite(w).all() or (w < 0).any():
             raise InputError(f"`weights` must be {len(p1)} finite non-negative numbers")
-    T1, T2 = hartley_normalization(p1), hartley_normalization(p2)
-    Fn = _eight_point_normalized(_apply(T1, p1), _apply(T2, p2), w)
+    Fn = _eight_point_normalized(x1n, x2n, w)
     return _unit(T2.T @ Fn @ T1)
 
 
@@ -210,59 +203,17 @@ def sampson_least_squares(pts1, pts2, rounds: int = _REFINE_ROUNDS) -> np.ndarra
     outliers); ``rounds`` (>= 0, else InputError) is the number of reweighting rounds.
     """
     check_int("rounds", rounds, 0)
-    p1, p2 = _check_pair(pts1, pts2, 8)
-    T1, T2 = hartley_normalization(p1), hartley_normalization(p2)
-    return _refit(_apply(T1, p1), _apply(T2, p2), p1, p2, T1, T2, np.ones(len(p1), bool), int(rounds))
+    p1, p2, T1, T2, x1n, x2n = _check_pair(pts1, pts2, 8)
+    F = np.empty((3, 3))
+    status = K.refit(_products(x1n, x2n), p1, p2, T1, T2, np.ones(len(p1), np.bool_), int(rounds),
+                     np.empty(len(p1)), F, np.empty((9, 9)), False)
+    if status != K.FM_OK:
+        raise EstimationError(_SOLVE_ERRORS[status])
+    return F
 
 
 def _apply(T: np.ndarray, p: np.ndarray) -> np.ndarray:
     return p @ T[:2, :2].T + T[:2, 2]
-
-
-def _seven_point_batch(x1n: np.ndarray, x2n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Fundamental matrices of a batch of 7-point samples.
-
-    Parameters
-    ----------
-    x1n, x2n : (B, 7, 2) float64
-        Normalized points of each sample.
-
-    Returns
-    -------
-    F : (M, 3, 3) float64
-        Every real solution of every regular sample (1 or 3 per sample).
-    owner : (M,) int
-        The sample each solution comes from.
-    """
-    A = _design(x1n, x2n)  # (B, 7, 9)
-    _, sv, vt = np.linalg.svd(A, full_matrices=True)
-    regular = sv[:, 6] > _RANK_EPS * sv[:, 0]
-    F1 = vt[regular, 7].reshape(-1, 3, 3)
-    F2 = vt[regular, 8].reshape(-1, 3, 3)
-    idx = np.flatnonzero(regular)
-    if len(idx) == 0:
-        return np.empty((0, 3, 3)), np.empty(0, dtype=np.int64)
-    # det(a F1 + (1 - a) F2) is a cubic in a: fit it exactly through 4 values
-    a_s = np.array([0.0, 1.0, -1.0, 2.0])
-    dets = np.stack([np.linalg.det(a * F1 + (1 - a) * F2) for a in a_s], axis=1)  # (B', 4)
-    V = np.vander(a_s, 4)  # columns a^3, a^2, a, 1
-    coef = np.linalg.solve(V, dets.T).T  # (B', 4): c3, c2, c1, c0
-    # roots of the cubics as eigenvalues of their companion matrices, all samples at once; a sample whose cubic
-    # degenerates (c3 ~ 0: F2 itself is a solution) is rare and simply skipped
-    scale = np.abs(coef).max(axis=1)
-    good = (scale > 0) & (np.abs(coef[:, 0]) > 1e-10 * np.where(scale > 0, scale, 1.0))
-    c = coef[good] / coef[good, :1]
-    comp = np.zeros((len(c), 3, 3))
-    comp[:, 0, :] = -c[:, 1:]
-    comp[:, 1, 0] = comp[:, 2, 1] = 1.0
-    roots = np.linalg.eigvals(comp)  # (B'', 3)
-    real = np.abs(roots.imag) <= 1e-8 * np.maximum(1.0, np.abs(roots))
-    si, ri = np.nonzero(real)
-    if len(si) == 0:
-        return np.empty((0, 3, 3)), np.empty(0, dtype=np.int64)
-    a = roots.real[si, ri][:, None, None]
-    gi = np.flatnonzero(good)[si]
-    return a * F1[gi] + (1 - a) * F2[gi], idx[gi]
 
 
 def seven_point(pts1, pts2) -> list[np.ndarray]:
@@ -289,10 +240,12 @@ def seven_point(pts1, pts2) -> list[np.ndarray]:
     if p1.shape != (7, 2) or p2.shape != (7, 2):
         raise InputError(f"the 7-point solver needs exactly 7 correspondences, got {len(p1)} and {len(p2)}")
     T1, T2 = hartley_normalization(p1), hartley_normalization(p2)
-    F, _ = _seven_point_batch(_apply(T1, p1)[None], _apply(T2, p2)[None])
-    if len(F) == 0:
+    Fns = np.empty((3, 3, 3))
+    count = K.seven_point(_apply(T1, p1), _apply(T2, p2), np.arange(7), Fns, np.empty((7, 9)), np.empty((3, 3)),
+                          np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty(9, np.int64))
+    if count == 0:
         raise EstimationError("the 7-point sample is degenerate (repeated or collinear points); draw another")
-    return [_unit(T2.T @ f @ T1) for f in F]
+    return [_unit(T2.T @ f @ T1) for f in Fns[:count]]
 
 
 def sampson_distance(F, pts1, pts2) -> np.ndarray:
@@ -313,18 +266,12 @@ def sampson_distance(F, pts1, pts2) -> np.ndarray:
     """
     F = np.asarray(F, dtype=np.float64)
     single = F.ndim == 2
-    Fs = F.reshape(-1, 3, 3)
-    p1 = np.asarray(pts1, dtype=np.float64).reshape(-1, 2)
-    p2 = np.asarray(pts2, dtype=np.float64).reshape(-1, 2)
-    x1, x2 = _hom(p1), _hom(p2)
-    # plain 2-D products, (N, 3) @ (3, M), one per needed row / column of F: BLAS instead of stacked temporaries
-    num = _design(p1, p2) @ Fs.reshape(-1, 9).T  # (N, M): x2^T F x1
-    a0, a1 = x1 @ Fs[:, 0, :].T, x1 @ Fs[:, 1, :].T  # rows 1, 2 of F x1
-    b0, b1 = x2 @ Fs[:, :, 0].T, x2 @ Fs[:, :, 1].T  # rows 1, 2 of F^T x2
-    den = a0 * a0 + a1 * a1 + b0 * b0 + b1 * b1
-    with np.errstate(divide="ignore", invalid="ignore"):
-        d = np.abs(num) / np.sqrt(den)
-    d = np.where(den > 0, d, np.inf).T  # (M, N)
+    Fs = np.ascontiguousarray(F.reshape(-1, 3, 3))
+    p1 = np.ascontiguousarray(np.asarray(pts1, dtype=np.float64).reshape(-1, 2))
+    p2 = np.ascontiguousarray(np.asarray(pts2, dtype=np.float64).reshape(-1, 2))
+    if len(p1) != len(p2):  # the broadcasting error of the former vectorized version
+        raise ValueError(f"`pts1` and `pts2` must have the same number of points, got {len(p1)} and {len(p2)}")
+    d = K.sampson_distances(Fs, p1, p2, np.empty((len(Fs), len(p1))))
     return d[0] if single else d
 
 
@@ -337,64 +284,12 @@ def epipoles(F) -> tuple[np.ndarray, np.ndarray]:
 # ------------------------------------------------------------------------------------------------- RANSAC
 
 
-def _msac_cost(d: np.ndarray, thr2: float) -> np.ndarray:
-    return np.minimum(d * d, thr2).sum(axis=-1)
-
-
-def _refit(x1n, x2n, p1, p2, T1, T2, mask, rounds):
-    """Sampson-reweighted normalized 8-point on ``mask``; returns F in pixel coordinates (unit norm)."""
-    Fn = _eight_point_normalized(x1n[mask], x2n[mask])
-    for _ in range(rounds):
-        F = T2.T @ Fn @ T1
-        h1, h2 = _hom(p1[mask]), _hom(p2[mask])
-        Fx1, Ftx2 = h1 @ F.T, h2 @ F
-        den = Fx1[:, 0] ** 2 + Fx1[:, 1] ** 2 + Ftx2[:, 0] ** 2 + Ftx2[:, 1] ** 2
-        # algebraic residual / its gradient norm = Sampson distance; the normalization changes the algebraic
-        # scale by a constant factor only
-        w = 1.0 / np.sqrt(np.maximum(den, 1e-300))
-        Fn = _eight_point_normalized(x1n[mask], x2n[mask], w / w.mean())
-    return _unit(T2.T @ Fn @ T1)
-
-
 def _noise_cutoff(d: np.ndarray, threshold: float) -> float:
     """Tukey's cut-off ``_TUKEY_C * sigma`` for Sampson distances ``d``, with the noise scale ``sigma`` estimated
     robustly from the inliers (``1.4826 * median`` of the distances within ``threshold``), kept within
-    ``[_MIN_C, _FINAL_WSCALE] * threshold``."""
-    inl = d[d <= threshold]
-    sigma = _MAD_TO_SIGMA * float(np.median(inl)) if len(inl) else threshold
-    return min(_FINAL_WSCALE * threshold, max(_TUKEY_C * sigma, _MIN_C * threshold))
-
-
-def _refit_robust(x1n, x2n, p1, p2, T1, T2, F, threshold, rounds):
-    """Iteratively reweighted 8-point over every correspondence with Sampson weights times Tukey's biweight of the
-    Sampson distance, so the result depends smoothly on the inlier set; the cut-off follows the noise scale of the
-    inliers, re-estimated each round (:func:`_noise_cutoff`)."""
-    for _ in range(rounds):
-        h1, h2 = _hom(p1), _hom(p2)
-        Fx1, Ftx2 = h1 @ F.T, h2 @ F
-        den = np.maximum(Fx1[:, 0] ** 2 + Fx1[:, 1] ** 2 + Ftx2[:, 0] ** 2 + Ftx2[:, 1] ** 2, 1e-300)
-        d = np.abs((Fx1 * h2).sum(axis=1)) / np.sqrt(den)
-        c = _noise_cutoff(d, threshold)
-        use = d < c
-        if use.sum() < 8:
-            break
-        w = (1.0 - (d[use] / c) ** 2) ** 2 / np.sqrt(den[use])
-        F = _unit(T2.T @ _eight_point_normalized(x1n[use], x2n[use], w / w.mean()) @ T1)
-    return F
-
-
-def _finish(x1n, x2n, p1, p2, T1, T2, F, threshold, min_inliers):
-    """The final refinement of one RANSAC model: 8-point refits with inlier re-selection, then the robust refit."""
-    mask = sampson_distance(F, p1, p2) <= threshold
-    for _ in range(2):  # refit, re-select inliers, refit (the inlier set settles in one or two rounds)
-        F = _refit(x1n, x2n, p1, p2, T1, T2, mask, _REFINE_ROUNDS)
-        new = sampson_distance(F, p1, p2) <= threshold
-        if new.sum() < min_inliers or np.array_equal(new, mask):
-            break
-        mask = new
-    if _FINAL_WSCALE > 0:
-        F = _refit_robust(x1n, x2n, p1, p2, T1, T2, F, threshold, _REFINE_ROUNDS)
-    return F
+    ``[_MIN_C, _FINAL_WSCALE] * threshold`` (the kernel :func:`cvpipe.stereo._kernels.noise_cutoff`)."""
+    d = np.ascontiguousarray(d, dtype=np.float64)
+    return float(K.noise_cutoff(d, float(threshold), np.empty(len(d)), False))
 
 
 def _homography_share(p1: np.ndarray, p2: np.ndarray, threshold: float, rng: np.random.Generator) -> float:
@@ -447,45 +342,40 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
         raise InputError(f"`confidence` must be in (0, 1), got {confidence!r}")
     check_int("max_iters", max_iters, 1)
     check_int("min_inliers", min_inliers, 8)
-    p1, p2 = _check_pair(pts1, pts2, 8)
+    p1, p2, T1, T2, x1n, x2n = _check_pair(pts1, pts2, 8)
+    PT = _products(x1n, x2n)
     gen = np.random.default_rng(rng)
     n = len(p1)
     thr2 = float(threshold) ** 2
-    T1, T2 = hartley_normalization(p1), hartley_normalization(p2)
-    x1n, x2n = _apply(T1, p1), _apply(T2, p2)
     log1mconf = math.log1p(-float(confidence))
 
     best_F, best_cost, best_count, history, pool = None, np.inf, 0, [], []
     bound, iterations, attempts = float(max_iters), 0, 0
+    models, costs, mask = np.empty((3 * _BATCH, 3, 3)), np.empty(3 * _BATCH), np.empty(n, np.bool_)
     while (iterations < bound or iterations < min(_MIN_SAMPLES, max_iters)) and attempts < 10 * max_iters + 100:
-        k = _BATCH
-        # 7 distinct indices per sample: argpartition of uniforms is exact sampling without replacement
-        samples = np.argpartition(gen.random((k, n)), 7, axis=1)[:, :7] if n > 7 else np.tile(np.arange(7), (k, 1))
-        attempts += k
-        Fn, owner = _seven_point_batch(x1n[samples], x2n[samples])
-        iterations += len(np.unique(owner))
-        if len(Fn) == 0:
+        # 7 distinct indices per sample from 7 uniforms (exact sampling without replacement, in the kernel); the
+        # models of the batch in pixel coordinates with their MSAC costs (those that cannot be among the lowest
+        # _POOL_PER_BATCH are left unfinished at cost inf)
+        m, regular = K.ransac_batch(gen.random((_BATCH, 7)), x1n, x2n, p1, p2, T1, T2, thr2, _POOL_PER_BATCH,
+                                    models, costs)
+        attempts += _BATCH
+        iterations += regular
+        if m == 0:
             continue
-        Fpx = np.einsum("ji,mjk,kl->mil", T2, Fn, T1)
-        d = sampson_distance(Fpx, p1, p2)
-        cost = _msac_cost(d, thr2)
+        cost = costs[:m]
         for i in np.argsort(cost)[:_POOL_PER_BATCH]:
-            pool.append((float(cost[i]), Fpx[i]))
+            pool.append((float(cost[i]), models[i].copy()))
         j = int(np.argmin(cost))
         if cost[j] < best_cost:
-            best_cost, best_F = float(cost[j]), Fpx[j]
+            best_cost, best_F = float(cost[j]), models[j].copy()
             history.append(best_F)
-            mask = d[j] <= threshold
-            if mask.sum() >= 8:  # local optimization: the least-squares model of the new best's inliers
-                try:
-                    F_lo = _refit(x1n, x2n, p1, p2, T1, T2, mask, 0)
-                    c_lo = float(_msac_cost(sampson_distance(F_lo, p1, p2), thr2))
-                    if c_lo < best_cost:
-                        best_cost, best_F = c_lo, F_lo
-                        history.append(best_F)
-                except EstimationError:
-                    pass
-            count = int((sampson_distance(best_F, p1, p2) <= threshold).sum())
+            # local optimization: the least-squares model of the new best's inliers
+            F_lo = np.empty((3, 3))
+            ok, c_lo = K.local_optimize(PT, p1, p2, T1, T2, best_F, thr2, F_lo)
+            if ok and c_lo < best_cost:
+                best_cost, best_F = c_lo, F_lo
+                history.append(best_F)
+            count = K.count_within(best_F, p1, p2, thr2, mask)
             if count > best_count:
                 best_count = count
                 w = count / n
@@ -496,34 +386,21 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
             raise EstimationError(_PLANAR_MESSAGE)
         raise EstimationError(f"all {attempts} sampled 7-point sets were degenerate; the correspondences are "
                               "nearly collinear or repeated")
-    mask = sampson_distance(best_F, p1, p2) <= threshold
+    d_best = sampson_distance(best_F, p1, p2)
+    mask = d_best <= threshold
     if mask.sum() < min_inliers:
         raise EstimationError(
             f"only {int(mask.sum())} correspondences fit one epipolar geometry within {threshold} px (need "
             f"{min_inliers}): the views share too little; supply more overlap or raise `threshold`")
     # several starts for the final refinement (see _FINAL_STARTS): keep the lowest final cost
-    F, final_cost = None, np.inf
     # the starts compete on the MSAC cost truncated at the noise cut-off of the RANSAC model, not at the threshold:
     # with the threshold 5-10x the noise, the tail would decide between nearly equal models
-    sel2 = _noise_cutoff(sampson_distance(best_F, p1, p2), float(threshold)) ** 2
+    sel2 = _noise_cutoff(d_best, float(threshold)) ** 2
     starts = history[-_FINAL_STARTS:] + [f for _, f in sorted(pool, key=lambda t: t[0])[:_FINAL_STARTS]]
     # a cheap look at each start (two robust rounds), then the full refinement of the two most promising
-    quick = []
-    for start in starts:
-        try:
-            q = _refit_robust(x1n, x2n, p1, p2, T1, T2, start, float(threshold), 2)
-        except EstimationError:
-            continue
-        quick.append((float(_msac_cost(sampson_distance(q, p1, p2), sel2)), q))
-    for _, start in sorted(quick, key=lambda t: t[0])[:2]:
-        try:
-            cand = _finish(x1n, x2n, p1, p2, T1, T2, start, float(threshold), min_inliers)
-        except EstimationError:
-            continue
-        c = float(_msac_cost(sampson_distance(cand, p1, p2), sel2))
-        if c < final_cost:
-            F, final_cost = cand, c
-    if F is None:
+    F = np.empty((3, 3))
+    if not K.final_refinement(PT, p1, p2, T1, T2, np.array(starts), float(threshold), sel2, int(min_inliers),
+                              2, 2, F):
         F = best_F
     d = sampson_distance(F, p1, p2)
     mask = d <= threshold
