@@ -468,28 +468,42 @@ def sampson_distances(Fs, p1, p2, out):  # pragma: no cover - compiled
 _COST_BLOCK = 64
 
 
-@njit(cache=True, error_model="numpy", fastmath={"reassoc"})
+@njit(cache=True, error_model="numpy")
+def _truncated_sampson(f00, f01, f02, f10, f11, f12, f20, f21, f22, x, y, u, v, thr2):  # pragma: no cover
+    """``min(d^2, thr2)`` of one correspondence, d its Sampson distance under F (inf when undefined)."""
+    a0 = f00 * x + f01 * y + f02
+    a1 = f10 * x + f11 * y + f12
+    a2 = f20 * x + f21 * y + f22
+    b0 = f00 * u + f10 * v + f20
+    b1 = f01 * u + f11 * v + f21
+    num = u * a0 + v * a1 + a2
+    den = a0 * a0 + a1 * a1 + b0 * b0 + b1 * b1
+    e = num * num / den if den > 0.0 else np.inf
+    return e if e <= thr2 else thr2
+
+
+@njit(cache=True, error_model="numpy")
 def _msac_block(F, p1, p2, thr2, start, stop):  # pragma: no cover - compiled
-    """``sum_i min(d_i^2, thr2)`` for i in [start, stop) (reassociated: the loop runs on SIMD lanes)."""
+    """``sum_i min(d_i^2, thr2)`` for i in [start, stop), in four interleaved partial sums added in a fixed order:
+    the compiler can run them on SIMD lanes without reassociating, so the sum is the same on every CPU."""
     f00, f01, f02 = F[0, 0], F[0, 1], F[0, 2]
     f10, f11, f12 = F[1, 0], F[1, 1], F[1, 2]
     f20, f21, f22 = F[2, 0], F[2, 1], F[2, 2]
-    c = 0.0
-    for i in range(start, stop):
-        x = p1[i, 0]
-        y = p1[i, 1]
-        u = p2[i, 0]
-        v = p2[i, 1]
-        a0 = f00 * x + f01 * y + f02
-        a1 = f10 * x + f11 * y + f12
-        a2 = f20 * x + f21 * y + f22
-        b0 = f00 * u + f10 * v + f20
-        b1 = f01 * u + f11 * v + f21
-        num = u * a0 + v * a1 + a2
-        den = a0 * a0 + a1 * a1 + b0 * b0 + b1 * b1
-        e = num * num / den if den > 0.0 else np.inf
-        c += e if e <= thr2 else thr2
-    return c
+    c0 = c1 = c2 = c3 = 0.0
+    full = start + (stop - start) - (stop - start) % 4
+    for i in range(start, full, 4):
+        c0 += _truncated_sampson(f00, f01, f02, f10, f11, f12, f20, f21, f22, p1[i, 0], p1[i, 1], p2[i, 0],
+                                 p2[i, 1], thr2)
+        c1 += _truncated_sampson(f00, f01, f02, f10, f11, f12, f20, f21, f22, p1[i + 1, 0], p1[i + 1, 1],
+                                 p2[i + 1, 0], p2[i + 1, 1], thr2)
+        c2 += _truncated_sampson(f00, f01, f02, f10, f11, f12, f20, f21, f22, p1[i + 2, 0], p1[i + 2, 1],
+                                 p2[i + 2, 0], p2[i + 2, 1], thr2)
+        c3 += _truncated_sampson(f00, f01, f02, f10, f11, f12, f20, f21, f22, p1[i + 3, 0], p1[i + 3, 1],
+                                 p2[i + 3, 0], p2[i + 3, 1], thr2)
+    for i in range(full, stop):
+        c0 += _truncated_sampson(f00, f01, f02, f10, f11, f12, f20, f21, f22, p1[i, 0], p1[i, 1], p2[i, 0],
+                                 p2[i, 1], thr2)
+    return (c0 + c1) + (c2 + c3)
 
 
 @njit(cache=True, error_model="numpy")
@@ -690,15 +704,26 @@ def design_products(x1n, x2n, PT):  # pragma: no cover - compiled
     return PT
 
 
-@njit(cache=True, error_model="numpy", fastmath={"reassoc"})
+@njit(cache=True, error_model="numpy")
 def _normal_sums(PT, w2, S):  # pragma: no cover - compiled
-    """``S = PT @ w2``: 36 dot products, each vectorized (reassociated)."""
+    """``S = PT @ w2``: 36 dot products, each in eight interleaved partial sums added in a fixed order (SIMD lanes
+    without reassociation: the same sums on every CPU)."""
     n = w2.shape[0]
+    full = n - n % 8
     for k in range(36):
-        t = 0.0
-        for i in range(n):
-            t += PT[k, i] * w2[i]
-        S[k] = t
+        t0 = t1 = t2 = t3 = t4 = t5 = t6 = t7 = 0.0
+        for i in range(0, full, 8):
+            t0 += PT[k, i] * w2[i]
+            t1 += PT[k, i + 1] * w2[i + 1]
+            t2 += PT[k, i + 2] * w2[i + 2]
+            t3 += PT[k, i + 3] * w2[i + 3]
+            t4 += PT[k, i + 4] * w2[i + 4]
+            t5 += PT[k, i + 5] * w2[i + 5]
+            t6 += PT[k, i + 6] * w2[i + 6]
+            t7 += PT[k, i + 7] * w2[i + 7]
+        for i in range(full, n):
+            t0 += PT[k, i] * w2[i]
+        S[k] = ((t0 + t1) + (t2 + t3)) + ((t4 + t5) + (t6 + t7))
 
 
 @njit(cache=True, error_model="numpy")
