@@ -180,9 +180,10 @@ def _grid(h: int, w: int, rho: float, theta: float, min_theta: float, max_theta:
 # ------------------------------------------------------------------------------------------------- standard
 
 
-#: fewer votes than this (edge pixels x angles) are cast on one thread: about 1 ms of work, below which starting
-#: the threads and waiting at their barrier costs more than the second core saves
-_PARALLEL_MIN_VOTES = 1_500_000
+#: fewer votes than this (edge pixels x angles) are cast on one thread: on 2 cores the parallel vote of a 640x480
+#: photo (2-8M votes, 2-9 ms) was as often slower as faster than one thread (numba's workqueue threads start and
+#: wait at a barrier per call), so it is kept for edge maps about twice the largest of York Urban and beyond
+_PARALLEL_MIN_VOTES = 16_000_000
 
 
 def _use_parallel(parallel: bool | None, votes: int | None = None) -> bool:
