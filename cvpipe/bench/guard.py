@@ -41,7 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the bundled samples (made by `dvc repro samples`; default data/samples)")
     parser.add_argument("--data", default=os.environ.get("CVPIPE_DATA"),
                         help="root of the real data sets (default: $CVPIPE_DATA); their rows skip when absent")
-    parser.add_argument("--repeats", type=int, default=5, help="timed calls per item and side, best taken")
+    parser.add_argument("--repeats", type=int, default=3, help="timed calls per item and side, best taken")
     parser.add_argument("--rows", nargs="+", help="only these rows (default: all)")
     parser.add_argument("--limits", default=str(LIMITS_FILE), help="the limits file (default: the committed one)")
     parser.add_argument("--out", help="also write the results as JSON to this file")
