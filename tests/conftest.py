@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+# first, before numpy and OpenCV load: the tests run with the code paths the stages pin (stages/__init__.py), so that
+# a result computed in a test's own process is the same, bit for bit, as the one a stage wrote
+import stages  # noqa: F401,I001
+
 import os
 from pathlib import Path
 
