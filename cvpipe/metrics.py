@@ -286,3 +286,15 @@ def headline(metrics: Mapping[str, Any]) -> dict:
 
     return {task: keep(body, HEADLINE.get(task, ())) for task, body in metrics.items() if isinstance(body, Mapping)}
 
+
+def rounded(rows: Any) -> Any:
+    """``rows`` (JSON-like: dicts, lists, numbers) with every float rounded to :data:`METRIC_DECIMALS`: plot rows
+    are written at the precision they carry, so that noise below it never shows as a change."""
+    if isinstance(rows, float):
+        return round(rows, METRIC_DECIMALS)
+    if isinstance(rows, Mapping):
+        return {k: rounded(v) for k, v in rows.items()}
+    if isinstance(rows, (list, tuple)):
+        return [rounded(v) for v in rows]
+    return rows
+

@@ -33,7 +33,7 @@ from typing import Any, Callable, Iterable, Iterator, Sequence, TypeVar
 
 from cvpipe import interrupt, io
 from cvpipe.errors import CvpipeError, EstimationError, InputError
-from cvpipe.metrics import headline
+from cvpipe.metrics import headline, rounded
 from cvpipe.params import SECTIONS, load_section
 
 T = TypeVar("T")
@@ -226,7 +226,7 @@ class Stage:
         if metrics is not None:
             self.save_metrics(self.args.metrics, metrics)
         for name, rows in (plots or {}).items():
-            io.save_json(Path(self.args.plots) / f"{name}.json", rows)
+            self.save_plot(Path(self.args.plots) / f"{name}.json", rows)
         self.carry(dropped)
 
     def save_metrics(self, path: str | os.PathLike, metrics: dict) -> None:
@@ -235,6 +235,10 @@ class Stage:
         goes to the cached details file beside it (:func:`details_path`)."""
         io.save_json(path, headline(metrics))
         io.save_json(details_path(path), metrics)
+
+    def save_plot(self, path: str | os.PathLike, rows: Any) -> None:
+        """A ``dvc plots`` file: ``rows`` with their floats rounded as the metrics are (:func:`cvpipe.metrics.rounded`)."""
+        io.save_json(path, rounded(rows))
 
     def carry(self, dropped: Iterable[dict]) -> None:
         """Repeat what an earlier stage dropped (``{"item", "reason"}`` records) in this stage's summary line."""

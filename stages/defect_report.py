@@ -46,8 +46,8 @@ def defect_report(st: Stage) -> None:
             pictures.append({"path": (out / f"{key}.png").as_posix(), "caption": caption})
     dropped = [{"item": r["probe"], "reason": r["error"]} for r in records if r["verdict"] is None]
     st.save_metrics(out / "metrics.json", rep.metrics_of(records, evaluated))
-    io.save_json(out / "plots" / "confusion.json", rep.confusion_rows(records, truth))
-    io.save_json(out / "plots" / "scores.json", rep.score_rows(records))
+    st.save_plot(out / "plots" / "confusion.json", rep.confusion_rows(records, truth))
+    st.save_plot(out / "plots" / "scores.json", rep.score_rows(records))
     io.save_json(out / "summary.json", rep.report_summary(records, registration["probes"], evaluated, pictures,
                                                           dropped))
     for d in dropped:

@@ -54,7 +54,7 @@ def logo_report(st: Stage) -> None:
     references = sum(len(files) for files in inputs.gallery.values())
     io.save_json(a.summary, logo.report_summary(decisions, brands, references, vp.score_threshold, pictures,
                                                  dropped))
-    io.save_json(a.found, logo.found_plot(decisions, brands))
+    st.save_plot(a.found, logo.found_plot(decisions, brands))
     st.made(f"{len(decisions[best])} scenes, detectors {', '.join(a.methods)}, {len(pictures)} pictures -> {out}")
     for d in dropped:
         st.drop(d["item"], f"{', '.join(d['methods'])}: {d['reason']}")

@@ -59,7 +59,7 @@ def logo_verify(st: Stage) -> None:
     io.save_json(out / "decisions.json", {"detector": a.detector, "brands": brands, "scenes": records})
     io.save_json(out / "dropped.json", io.load_json(Path(a.matches) / "dropped.json") + st.dropped)
     st.save_metrics(a.metrics, logo.metrics_of(records, brands, a.detector, vp.score_threshold))
-    io.save_json(a.pr, logo.pr_rows(records, a.detector, vp.score_threshold))
+    st.save_plot(a.pr, logo.pr_rows(records, a.detector, vp.score_threshold))
     found = sum(r["brand"] is not None for r in records)
     st.made(f"{found} of {len(records)} scenes given a brand ({sum(r['labelled'] for r in records)} with ground "
             f"truth) -> {out}")

@@ -46,7 +46,7 @@ def panorama_report(st: Stage) -> None:
     dropped = pr.not_processed(io.load_json(Path(a.features) / "dropped.json"), homs, crops, opencv)
     st.save_metrics(a.metrics, pr.metrics_of(results))
     io.save_json(a.summary, pr.report_summary(results, _pictures(st, results), dropped))
-    io.save_json(Path(a.plots) / "sets.json", pr.quality_plot(results))
+    st.save_plot(Path(a.plots) / "sets.json", pr.quality_plot(results))
     ok = sum(r["ours"]["ok"] for r in results)
     st.made(f"{len(results)} sets compared (ours stitched {ok}, cv2.Stitcher "
             f"{sum(r['opencv_stitcher']['ok'] for r in results)}; {sum(r['truth'] for r in results)} with truth)")
