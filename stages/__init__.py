@@ -2,13 +2,18 @@
 
 Importing this package pins the code paths that libraries choose per CPU at run time and that change results, so
 that every x86-64 machine with AVX2 writes the same bytes (``python -m stages.<name>`` imports it before anything
-else, so before numpy and OpenCV read these variables; Dask workers started by a stage inherit them):
+else, so before numpy and OpenCV read these variables; Dask workers started by a stage inherit them). Each level is
+the highest one that every such machine has (AVX2 and FMA, x86-64-v3):
 
 - ``OPENBLAS_CORETYPE=Haswell``: numpy's OpenBLAS picks its kernels per CPU, and the SVDs, eigen-decompositions and
   inverses of the estimators differ in their last bits between them (measured: SkylakeX and Haswell kernels give
   different results on the same input);
-- ``OPENCV_CPU_DISABLE=AVX512F,AVX512-SKX``: OpenCV's dispatched code stops at AVX2, which every such machine has
-  (its SIFT output changes with the dispatched path).
+- ``OPENCV_CPU_DISABLE``: OpenCV's dispatched code stops at AVX2 (its SIFT output changes with the dispatched path);
+- ``OPENCV_IPP=AVX2``: the Intel IPP functions inside OpenCV (filters, resizing, warps) take their AVX2 code, not
+  their AVX-512 code;
+- ``NPY_DISABLE_CPU_FEATURES``: numpy's AVX-512 loops are off (measured: ``np.argsort`` orders ties differently and
+  ``np.arctan2`` differs in the last bit between its AVX-512 and AVX2 loops). Names a numpy build does not dispatch
+  are ignored by it with an ImportWarning, hidden by default; features the machine lacks are ignored silently.
 
 numba's kernels are compiled for the host CPU but without fast-math, so their results do not depend on it (measured
 with ``NUMBA_CPU_NAME`` haswell, skylake-avx512 and the host: the same bytes); they are not pinned.
@@ -17,6 +22,11 @@ with ``NUMBA_CPU_NAME`` haswell, skylake-avx512 and the host: the same bytes); t
 import os
 
 #: environment variables set for every stage (see the module docstring)
-PINNED_ENV = {"OPENBLAS_CORETYPE": "Haswell", "OPENCV_CPU_DISABLE": "AVX512F,AVX512-SKX"}
+PINNED_ENV = {
+    "OPENBLAS_CORETYPE": "Haswell",
+    "OPENCV_CPU_DISABLE": "AVX512F,AVX512-SKX,AVX512-CLX,AVX_VNNI",
+    "OPENCV_IPP": "AVX2",
+    "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR AVX512F AVX512_SKX",
+}
 
 os.environ.update(PINNED_ENV)

@@ -1,7 +1,7 @@
 """The pipeline's stages write the same bytes whatever CPU-dependent code paths the machine would choose.
 
-A second machine is emulated through the variables that select those paths (OpenCV's dispatched instruction sets,
-OpenBLAS's kernels): the stages pin them on start (``stages.PINNED_ENV``), so a feature stage and an estimate stage
+A second machine is emulated through the variables that select those paths (OpenCV's dispatched instruction sets and
+IPP code paths, numpy's loops, OpenBLAS's kernels): the stages pin them on start (``stages.PINNED_ENV``), so a feature stage and an estimate stage
 must write byte-identical outputs with and without the emulation. (numba's kernels are not emulated: compiled for
 another target CPU with ``NUMBA_CPU_NAME`` they gave the same bytes, see ``stages/__init__.py``.) Without the pin, OpenCV's
 SIFT on the emulated machine (no AVX2 dispatch) gives other keypoints, and this test fails.
@@ -22,8 +22,10 @@ from cvpipe.samples import fit, photo
 
 ROOT = Path(__file__).resolve().parents[1]
 
-#: another x86-64 machine, as far as the libraries can tell: fewer OpenCV dispatch levels, other OpenBLAS kernels
-OTHER_CPU = {"OPENCV_CPU_DISABLE": "AVX2,FP16,AVX512F,AVX512-SKX", "OPENBLAS_CORETYPE": "Zen"}
+#: another x86-64 machine, as far as the libraries can tell: fewer OpenCV dispatch levels and IPP code paths, numpy
+#: loops without AVX2, other OpenBLAS kernels
+OTHER_CPU = {"OPENCV_CPU_DISABLE": "AVX2,FP16,AVX512F,AVX512-SKX", "OPENCV_IPP": "SSE42",
+             "NPY_DISABLE_CPU_FEATURES": "X86_V3 X86_V4 AVX512_ICL AVX512_SPR", "OPENBLAS_CORETYPE": "Zen"}
 
 
 def _pair_folder(folder: Path) -> None:
