@@ -197,9 +197,12 @@ def _classify(exc: BaseException) -> tuple[str, str | None, int]:
 
 
 def _note(message, category, filename, lineno, file=None, line=None) -> None:
-    """Our own warnings (work scaled down to fit the memory budget) as one ``cvpipe: note:`` line on stderr."""
+    """Our own warnings (work scaled down to fit the memory budget) as one ``cvpipe: note:`` line on stderr (none with
+    ``-q``)."""
     if issubclass(category, BudgetWarning):
-        print(f"cvpipe: note: {message}", file=sys.stderr)
+        from .commands import note
+
+        note(f"note: {message}")
     else:
         _SHOW_WARNING(message, category, filename, lineno, file, line)
 

@@ -548,6 +548,17 @@ def test_huge_image_detection_is_downscaled_and_says_so(monkeypatch, textured_im
     assert small.xy[:, 0].max() > 0.8 * textured_image.shape[1] and small.xy[:, 1].max() > 0.8 * full.xy[:, 1].max()
 
 
+def test_budget_note_is_one_line_and_silenced_by_quiet(capsys, monkeypatch, views):
+    # a budget of a tenth of what SIFT needs on the 320x240 views: the command scales detection down and says so
+    monkeypatch.setenv("CVPIPE_MEMORY_BUDGET_GB", str(320 * 240 * 250 / 10 / 1e9))
+    argv = ["homography", views["a"], views["b"], "--detector", "sift", "--json"]
+    code, lines, _ = run_main(capsys, argv)
+    notes = [ln for ln in lines if ln.startswith("cvpipe: note: ")]
+    assert notes and all("memory budget" in ln for ln in notes), lines
+    code_quiet, lines_quiet, _ = run_main(capsys, ["-q", *argv])
+    assert code_quiet == code and lines_quiet == []
+
+
 def test_stereo_paths_6_refused_by_the_parameters():
     with pytest.raises(ValueError, match=r"`paths` must be one of \[4, 8\], got 6"):
         StereoSgmParams(paths=6)
