@@ -117,6 +117,17 @@ def _about_file(fn):
     return wrapper
 
 
+def existing_file(path: str | os.PathLike, what: str) -> Path:
+    """``path`` as a Path when it names a file; InputError naming it when it is missing or a folder (``what``:
+    what the caller expected, e.g. "an image")."""
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"{p}: no such file")
+    if p.is_dir():
+        raise InputError(f"{p}: is a folder, expected {what} file")
+    return p
+
+
 @_about_file
 def read_image(path: str | os.PathLike, mode: str = "color", max_pixels: int = DEFAULT_MAX_PIXELS) -> np.ndarray:
     """Read an image file with checks that name the file and say what was expected.
@@ -143,11 +154,7 @@ def read_image(path: str | os.PathLike, mode: str = "color", max_pixels: int = D
     if mode not in _MODES:
         raise ValueError(f"`mode` must be one of {sorted(_MODES)}, got {mode!r}")
     check_int("max_pixels", max_pixels, 1)
-    p = Path(path)
-    if not p.exists():
-        raise InputError(f"{p}: no such file")
-    if p.is_dir():
-        raise InputError(f"{p}: is a folder, expected an image file")
+    p = existing_file(path, "an image")
     data = p.read_bytes()
     if not data:
         raise InputError(f"{p}: file is empty (0 bytes), expected an image")
@@ -200,11 +207,7 @@ def read_text(path: str | os.PathLike, what: str = "text", max_bytes: int = DEFA
         Missing file, a folder, unreadable, over ``max_bytes``, not UTF-8 or holding NUL bytes.
     """
     check_int("max_bytes", max_bytes, 1)
-    p = Path(path)
-    if not p.exists():
-        raise InputError(f"{p}: no such file")
-    if p.is_dir():
-        raise InputError(f"{p}: is a folder, expected a {what} file")
+    p = existing_file(path, f"a {what}")
     try:
         with open(p, "rb") as fh:
             data = fh.read(max_bytes + 1)
@@ -530,9 +533,7 @@ def save_npz(path: str | os.PathLike, **arrays: Any) -> None:
 @_about_file
 def load_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
     """Read every array of an ``.npz`` written by :func:`save_npz` (``allow_pickle=False``)."""
-    p = Path(path)
-    if not p.exists():
-        raise InputError(f"{p}: no such file")
+    p = existing_file(path, "an .npz")
     try:
         with np.load(p, allow_pickle=False) as z:
             return {k: z[k] for k in z.files}
@@ -571,9 +572,7 @@ def save_json(path: str | os.PathLike, obj: Any) -> None:
 @_about_file
 def load_json(path: str | os.PathLike) -> Any:
     """Read a JSON file, naming the file when it is missing or malformed."""
-    p = Path(path)
-    if not p.exists():
-        raise InputError(f"{p}: no such file")
+    p = existing_file(path, "a JSON")
     try:
         return json.loads(p.read_text(encoding="utf-8"))
     except json.JSONDecodeError as exc:

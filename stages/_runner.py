@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Sequence, TypeVar
 
 from cvpipe import interrupt, io
-from cvpipe.errors import CvpipeError, EstimationError, InputError
+from cvpipe.errors import BudgetError, CvpipeError, EstimationError, InputError
 from cvpipe.metrics import headline, rounded
 from cvpipe.params import SECTIONS, load_section
 
@@ -142,17 +142,26 @@ class Stage:
                     self.drop(name(pos), unread.pop(pos))
             flushed = max(flushed, upto)
 
+        over_budget: list[str] = []  # the reasons of the items the memory budget refused
+        succeeded = 0
         for res in map_items(fn, feed(), scheduler=scheduler, workers=c.workers or None,
                              window=c.window or None, shared=shared, progress=desc or self.name, total=total):
             pos = kept[res.index]
             flush(pos)
             flushed = pos + 1
             if res.ok:
+                succeeded += 1
                 yield name(pos), res.value
             else:
                 raise_unexpected(res)
                 self.drop(name(pos), res.error)
+                if res.error_type == BudgetError.__name__:
+                    over_budget.append(f"{name(pos)}: {res.error}")
         flush(max(unread, default=-1) + 1)
+        if over_budget and not succeeded and len(over_budget) == len(kept):
+            # nothing made, and only because of the budget: a failure, not "0 results" with exit 0
+            raise BudgetError(f"every item ({len(kept)}) was refused by the memory budget; the first: "
+                              f"{over_budget[0]}")
 
     def map_sets(self, sets: Sequence[tuple[str, dict]], fn: Callable, data: Callable[[str, dict], Any],
                  shared: Any, desc: str) -> Iterator[tuple[str, dict | None, Any]]:
