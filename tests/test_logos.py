@@ -127,6 +127,17 @@ def test_several_references_per_brand_do_not_cancel(marks):
     assert det.best.matches >= LogoVerifyParams().min_matches
 
 
+def test_the_same_picture_under_two_brands_is_refused_naming_both(marks):
+    """A copy under another name would tie every other-brand ratio test: neither brand could ever be found."""
+    feats = detect(cv2.cvtColor(marks["brand0"], cv2.COLOR_BGR2GRAY), "sift")
+    refs = [logo.Reference("brand0", "brand0.png", feats, (200, 200)),
+            logo.Reference("brand0_copy", "brand0_copy.png", feats, (200, 200))]
+    with pytest.raises(InputError, match=r"brand0_copy\.png: the same picture as brand0\.png, under another brand"):
+        logo.build_gallery(refs)
+    same_brand = [refs[0], logo.Reference("brand0", "brand0_copy.png", feats, (200, 200))]
+    assert logo.build_gallery(same_brand).brands == ("brand0",)
+
+
 def test_boxed_reference_projects_its_box(marks):
     """A reference that is a whole photo with the logo boxed: the quad is the box's outline in the scene."""
     canvas = fit(photo("chelsea"), 400, 300)

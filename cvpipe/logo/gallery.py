@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 from typing import Sequence
 
@@ -123,6 +124,23 @@ def _strongest(f: Features, n: int) -> Features:
     return Features(f.xy[keep], f.size[keep], f.angle[keep], f.response[keep], f.descriptors[keep], f.detector)
 
 
+def _refuse_copies_across_brands(refs: Sequence[Reference]) -> None:
+    """InputError naming both files when two brands hold the same picture (the same keypoints and descriptors).
+
+    The ratio test compares a brand's nearest descriptor with the nearest of any other brand: a copy of one brand's
+    picture under a second brand name ties every such comparison, and neither brand can be found.
+    """
+    seen: dict[bytes, Reference] = {}
+    for r in refs:
+        key = hashlib.sha1(np.ascontiguousarray(r.features.xy).tobytes()
+                           + np.ascontiguousarray(r.features.descriptors).tobytes()).digest()
+        first = seen.setdefault(key, r)
+        if first.brand != r.brand:
+            raise InputError(f"{r.name}: the same picture as {first.name}, under another brand ({r.brand!r} and "
+                             f"{first.brand!r}); no scene could be told apart between them: keep one, or put both "
+                             f"in the folder of one brand (DIR/<brand>/*.<ext>)")
+
+
 def build_gallery(references: Sequence[Reference], min_features: int = _MATCH.min_features,
                   max_features: int | None = None) -> Gallery:
     """Index the references of every brand once.
@@ -142,8 +160,9 @@ def build_gallery(references: Sequence[Reference], min_features: int = _MATCH.mi
     Raises
     ------
     InputError
-        Empty gallery, no reference with at least ``min_features`` keypoints (the message names the files), or a
-        bad ``min_features`` / ``max_features``.
+        Empty gallery, no reference with at least ``min_features`` keypoints (the message names the files), the
+        same picture under two brand names (the message names both files), or a bad ``min_features`` /
+        ``max_features``.
     ValueError
         Mixed detectors.
     """
@@ -173,6 +192,7 @@ def build_gallery(references: Sequence[Reference], min_features: int = _MATCH.mi
     if not usable:
         names = ", ".join(f"{r.name} ({len(r.features)})" for r in refs)
         raise InputError(f"no gallery image yields at least {min_features} keypoints with {detector}: {names}")
+    _refuse_copies_across_brands(usable)
     brands = tuple(sorted({r.brand for r in usable}))
     binary = DETECTORS[detector][1]
     desc = np.concatenate([_prepare(r.features.descriptors, binary) for r in usable])
