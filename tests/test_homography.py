@@ -413,3 +413,13 @@ def test_examples_in_docstrings_run(name):
     # import_module, not attribute access: cvpipe.homography.estimate is also the name of the function
     result = doctest.testmod(importlib.import_module(name), optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
     assert result.attempted > 0 and result.failed == 0, result
+
+
+def test_enormous_scale_keeps_h22_one():
+    # the unit square onto a square 1e12 wide: H[2, 2] is 7e-13 of |H| in the solver's output, and H / H[2, 2]
+    # (diag(1e12, 1e12, 1) plus a shift of 3) is finite, so it is the answer
+    src = np.array([[0.0, 0.0], [0.0, 1.0], [1.0, 0.0], [1.0, 1.0]])
+    fit = find_homography(src, src * 1e12 + 3.0, threshold=3.0, rng=0, max_iters=500)
+    assert fit.H[2, 2] == 1.0
+    # the shift of 3 sits beside entries of 1e12, where doubles are 1.2e-4 apart: 1e-3 is a few of those steps
+    np.testing.assert_allclose(fit.H, [[1e12, 0, 3], [0, 1e12, 3], [0, 0, 1]], rtol=1e-9, atol=1e-3)

@@ -32,11 +32,17 @@ def _check_not_collinear(name: str, pts: np.ndarray) -> None:
 
 
 def _unit_h22(H: np.ndarray) -> np.ndarray:
-    """``H`` scaled so that H[2, 2] = 1 (or to unit Frobenius norm with H[2, 2] >= 0 if H[2, 2] vanishes)."""
-    n = np.linalg.norm(H)
-    if abs(H[2, 2]) > 1e-12 * n:
-        return H / H[2, 2]
-    return H / n  # pragma: no cover - the origin of src maps to infinity: keep a finite representative
+    """``H`` scaled so that H[2, 2] = 1 (or to unit Frobenius norm if H[2, 2] is 0 or that scaling overflows).
+
+    H[2, 2] may be tiny against the other entries and still right: points 1e12 apart map the unit square with
+    H[2, 2] / |H| = 7e-13, and H / H[2, 2] is finite.
+    """
+    if H[2, 2] != 0.0:
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+            scaled = H / H[2, 2]
+        if np.isfinite(scaled).all():
+            return scaled
+    return H / np.linalg.norm(H)  # the origin of src maps to infinity: keep a finite representative
 
 
 def dlt(src, dst, weights=None) -> np.ndarray:
