@@ -197,6 +197,31 @@ def _sprt_threshold(eps, delta, tm):
     return a
 
 
+#: The search state of the RANSAC loop: one float64 array that ``find_homography`` creates (:func:`new_state`) and
+#: ``_ransac_chunk`` updates in place, chunk after chunk. Its slots, by name:
+#:
+#: - ``BEST_COST``: MSAC cost of the best model so far; ``BEST_INLIERS``: its inlier count (after local optimization);
+#: - ``BOUND``: iterations the adaptive bound asks for; ``ITERATIONS``: non-degenerate hypotheses scored;
+#:   ``DEGENERATE``: samples rejected before scoring; ``LO_RUNS``: local optimizations run;
+#: - ``SPRT_EPS``, ``SPRT_DELTA``: the SPRT's inlier share of a good and of a bad model; ``SPRT_A``: its decision
+#:   threshold; ``SPRT_TM``: the time of one hypothesis in point verifications;
+#: - ``BAD_CONSISTENT``, ``BAD_SEEN``, ``BAD_MODELS``: consistent points and points verified in the models the SPRT
+#:   rejected, and how many (they re-estimate ``SPRT_DELTA``).
+(BEST_COST, BEST_INLIERS, BOUND, ITERATIONS, DEGENERATE, LO_RUNS, SPRT_EPS, SPRT_DELTA, SPRT_A, BAD_CONSISTENT,
+ BAD_SEEN, BAD_MODELS, SPRT_TM) = range(13)
+
+
+def new_state(max_iters: int, eps: float, delta: float) -> np.ndarray:
+    """The search state before the first hypothesis (slots above): no model, the bound at ``max_iters``, the SPRT
+    designed for an inlier share ``eps`` of a good model and ``delta`` of a bad one."""
+    state = np.zeros(13)
+    state[BEST_COST] = np.inf
+    state[BOUND] = float(max_iters)
+    state[SPRT_EPS], state[SPRT_DELTA], state[SPRT_TM] = eps, delta, _SPRT_TM
+    state[SPRT_A] = _sprt_threshold(eps, delta, _SPRT_TM)
+    return state
+
+
 @njit(cache=True, error_model="numpy")
 def _collapsed(Hn):
     """True when the normalized model is nearly singular (see ``_MIN_CONDITION``)."""
@@ -215,7 +240,8 @@ def _ransac_chunk(src, dst, sn, dn, Ts, Tdi, Tsi, Td, u, thr2, log1mconf, max_it
                   best_H, state):
     """Run hypotheses from the uniforms ``u`` (K, 4) until the adaptive bound is met or ``u`` runs out.
 
-    ``state`` (the layout is commented in ``find_homography``) is updated in place, as is ``best_H`` (pixel coordinates). Returns the rows used.
+    ``state`` (its slots: :func:`new_state`) is updated in place, as is ``best_H`` (pixel coordinates).
+    Returns the rows used.
     """
     n = src.shape[0]
     Hn = np.empty((3, 3))
@@ -224,47 +250,48 @@ def _ransac_chunk(src, dst, sn, dn, Ts, Tdi, Tsi, Td, u, thr2, log1mconf, max_it
     e2 = np.empty(n)
     used = 0
     for k in range(u.shape[0]):
-        if state[3] >= state[2]:
+        if state[ITERATIONS] >= state[BOUND]:
             break
         used += 1
         i0, i1, i2, i3 = _sample4(u[k, 0], u[k, 1], u[k, 2], u[k, 3], n)
         if not _minimal_solve(sn, dn, i0, i1, i2, i3, Hn) or _collapsed(Hn):
-            state[4] += 1
+            state[DEGENERATE] += 1
             continue
-        state[3] += 1
+        state[ITERATIONS] += 1
         _denormalize(Hn, Ts, Tdi, tmp, H)
-        cost, cnt, seen, status = _score(src, dst, H, thr2, state[0], state[8], state[6], state[7])
-        if status != 0 or cost >= state[0]:
+        cost, cnt, seen, status = _score(src, dst, H, thr2, state[BEST_COST], state[SPRT_A], state[SPRT_EPS],
+                                         state[SPRT_DELTA])
+        if status != 0 or cost >= state[BEST_COST]:
             if status != 1:
                 continue
             # rejected by the SPRT: its consistent fraction estimates delta; redesign the test when that drifts
-            state[9] += cnt
-            state[10] += seen
-            state[11] += 1
-            if state[11] >= 20 and state[10] > 0:
-                d = max(state[9] / state[10], 1e-4)
-                if abs(d - state[7]) > 0.1 * state[7]:
-                    state[7] = min(d, 0.5 * state[6])
-                    state[8] = _sprt_threshold(state[6], state[7], state[12])
-                    state[2] = _bound(state[1], n, log1mconf, max_iters, state[8])
+            state[BAD_CONSISTENT] += cnt
+            state[BAD_SEEN] += seen
+            state[BAD_MODELS] += 1
+            if state[BAD_MODELS] >= 20 and state[BAD_SEEN] > 0:
+                d = max(state[BAD_CONSISTENT] / state[BAD_SEEN], 1e-4)
+                if abs(d - state[SPRT_DELTA]) > 0.1 * state[SPRT_DELTA]:
+                    state[SPRT_DELTA] = min(d, 0.5 * state[SPRT_EPS])
+                    state[SPRT_A] = _sprt_threshold(state[SPRT_EPS], state[SPRT_DELTA], state[SPRT_TM])
+                    state[BOUND] = _bound(state[BEST_INLIERS], n, log1mconf, max_iters, state[SPRT_A])
             continue
         raw_cnt = cnt
         if lo and cnt >= 8:
             Hb, cost_b, cnt_b = _local_optimize(src, dst, H, thr2, lo_multiplier, lo_steps, e2)
-            state[5] += 1
+            state[LO_RUNS] += 1
             _denormalize(Hb, Tsi, Td, tmp, Hn)
             if cost_b < cost and not _collapsed(Hn):
                 H[:, :] = Hb
                 cost = cost_b
                 cnt = cnt_b
-        state[0] = cost
+        state[BEST_COST] = cost
         best_H[:, :] = H
-        if raw_cnt / n > state[6]:
+        if raw_cnt / n > state[SPRT_EPS]:
             # eps from the unoptimized model: a fresh all-inlier minimal model is less accurate than an LO'd one
-            state[6] = raw_cnt / n
-            state[7] = min(state[7], 0.5 * state[6])
-            state[8] = _sprt_threshold(state[6], state[7], state[12])
-        if cnt > state[1]:
-            state[1] = cnt
-        state[2] = _bound(state[1], n, log1mconf, max_iters, state[8])
+            state[SPRT_EPS] = raw_cnt / n
+            state[SPRT_DELTA] = min(state[SPRT_DELTA], 0.5 * state[SPRT_EPS])
+            state[SPRT_A] = _sprt_threshold(state[SPRT_EPS], state[SPRT_DELTA], state[SPRT_TM])
+        if cnt > state[BEST_INLIERS]:
+            state[BEST_INLIERS] = cnt
+        state[BOUND] = _bound(state[BEST_INLIERS], n, log1mconf, max_iters, state[SPRT_A])
     return used

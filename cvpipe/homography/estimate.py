@@ -14,7 +14,7 @@ from ..errors import EstimationError, InputError, check_int
 from ..geometry import as_points
 from ..params import HomographyEstimateParams, section_or_default
 from ._kernels import _bounding_box, _chance_hits, _distinct_rows, _finalize, _normalize, _sq_errors
-from ._ransac_kernels import _SPRT_TM, _collapsed, _ransac_chunk, _sprt_threshold
+from ._ransac_kernels import BOUND, ITERATIONS, _collapsed, _ransac_chunk, new_state
 from .dlt import _check_pair, _unit_h22
 
 #: the ``homography.estimate`` defaults: the one declaration of the keyword defaults of the estimators here
@@ -310,23 +310,20 @@ def find_homography(
     Tdi = np.linalg.inv(Td)
     Tsi = np.linalg.inv(Ts)
     best_H = np.zeros((3, 3))
-    # best cost, best inliers, bound, iterations, degenerate samples, LO runs, SPRT eps, delta, A,
-    # consistent points seen in bad models, points evaluated in bad models, bad models
-    state = np.array([np.inf, 0.0, float(max_iters), 0.0, 0.0, 0.0, _SPRT_EPS0, _SPRT_DELTA0,
-                      _sprt_threshold(_SPRT_EPS0, _SPRT_DELTA0, _SPRT_TM), 0.0, 0.0, 0.0, _SPRT_TM])
+    state = new_state(int(max_iters), _SPRT_EPS0, _SPRT_DELTA0)
     log1mconf = math.log1p(-float(confidence))
     # degenerate samples are not counted as iterations; cap the attempts so an all-degenerate set terminates
     attempts, max_attempts, chunk = 0, 10 * int(max_iters) + 100, 256
     # the SPRT assumes the points are verified in random order; the caller's order may be sorted by quality
     perm = gen.permutation(n)
     sp, dp, snp, dnp = s[perm], d[perm], sn[perm], dn[perm]
-    while state[3] < state[2] and attempts < max_attempts:
+    while state[ITERATIONS] < state[BOUND] and attempts < max_attempts:
         k = int(min(chunk, max_attempts - attempts))
         u = gen.random((k, 4))
         attempts += _ransac_chunk(sp, dp, snp, dnp, Ts, Tdi, Tsi, Td, u, thr2, log1mconf, int(max_iters),
                                   bool(local_optimization), float(lo_multiplier), int(lo_steps), best_H, state)
         chunk = min(chunk * 2, 8192)
-    iterations = int(state[3])
+    iterations = int(state[ITERATIONS])
     if iterations == 0:
         raise EstimationError(
             f"all {attempts} sampled 4-point sets were degenerate (collinear or orientation-flipping); "
