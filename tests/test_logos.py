@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cvpipe import cli, logo
+from cvpipe import cli, errors, logo
 from cvpipe.geometry import apply_homography, image_corners
 from cvpipe.errors import EstimationError, InputError
 from cvpipe.features import detect
@@ -136,6 +136,34 @@ def test_the_same_picture_under_two_brands_is_refused_naming_both(marks):
         logo.build_gallery(refs)
     same_brand = [refs[0], logo.Reference("brand0", "brand0_copy.png", feats, (200, 200))]
     assert logo.build_gallery(same_brand).brands == ("brand0",)
+
+
+def test_gallery_over_the_memory_budget_is_refused_naming_what_to_change(marks, monkeypatch):
+    refs = [logo.Reference(b, f"{b}.png", detect(cv2.cvtColor(m, cv2.COLOR_BGR2GRAY), "sift"), (200, 200))
+            for b, m in marks.items()]
+    held = sum(logo.gallery.features_nbytes(r.features) for r in refs)
+    # a budget just under what the three references need (5 bytes per byte of keypoints), then just over it
+    monkeypatch.setenv("CVPIPE_MEMORY_BUDGET_GB", str(0.9 * 5 * held / 1e9))
+    with pytest.raises(errors.BudgetError, match=r"the gallery of 3 reference images .*`--max-features`"):
+        logo.build_gallery(refs)
+    monkeypatch.setenv("CVPIPE_MEMORY_BUDGET_GB", str(1.1 * 5 * held / 1e9))
+    assert logo.build_gallery(refs).brands == tuple(sorted(marks))
+
+
+def test_logo_command_refuses_a_gallery_over_the_budget_while_reading_it(marks, tmp_path, monkeypatch, capsys):
+    gallery = tmp_path / "gallery"
+    gallery.mkdir()
+    for b, m in marks.items():
+        cv2.imwrite(str(gallery / f"{b}.png"), m)
+    scene = tmp_path / "scene.png"
+    cv2.imwrite(str(scene), _scene(marks["brand0"], _view((300, 240), 0.8, 0, PERSP)))
+    # a budget that holds the detection of every image (0.1 GB), and a gallery that costs 10,000 bytes per byte of
+    # keypoints: the first reference (about 70 KB of them) is already over, so the command stops at it
+    monkeypatch.setenv("CVPIPE_MEMORY_BUDGET_GB", "0.1")
+    monkeypatch.setattr(logo.gallery, "GALLERY_BYTES_PER_FEATURE_BYTE", 1e4)
+    assert cli.main(["logo", "--gallery", str(gallery), str(scene)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "the gallery of 1 reference images" in err[0] and "CVPIPE_MEMORY_BUDGET_GB" in err[0]
 
 
 def test_boxed_reference_projects_its_box(marks):

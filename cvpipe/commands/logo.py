@@ -50,12 +50,15 @@ def gallery_references(folder: str | Path, detector: str, max_features: int) -> 
     """Read and detect every reference of a gallery folder (see :func:`gallery_files`)."""
     from .. import io, logo
     from ..features import detect
+    from ..logo.gallery import check_gallery_memory, features_nbytes
 
-    refs = []
+    refs, held = [], 0
     for brand, f in progress(gallery_files(folder), "gallery"):
         gray = io.read_image(f, "gray")
         refs.append(logo.Reference(brand, str(f), detect(gray, detector, max_features),
                                     (gray.shape[1], gray.shape[0])))
+        held += features_nbytes(refs[-1].features)
+        check_gallery_memory(held, len(refs))  # refused while reading, before the whole folder is in memory
     return refs
 
 
