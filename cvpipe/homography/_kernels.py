@@ -414,7 +414,7 @@ def _lm_refine(src, dst, weight, H0, max_iter):
                 improved = True
                 break
             lam *= 10.0
-        if not improved or rel < 1e-12:
+        if not improved or rel < 1e-9:
             break
     for k in range(8):
         Hn[k // 3, k % 3] = p[k]
