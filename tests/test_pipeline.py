@@ -69,6 +69,23 @@ def test_second_repro_runs_nothing(reproduced):
     print(f"no-op dvc repro: {elapsed:.2f} s")  # measured for BENCHMARKS.md, never asserted
 
 
+def test_a_code_change_reruns_the_stages_that_run_that_code(reproduced):
+    # every stage depends on each file it imports (tests/stage_deps.py): an edit of the Hough transform makes the
+    # Hough stages that import it out of date, and no stage of another task
+    repo, _ = reproduced
+    source = repo / "cvpipe" / "hough" / "transform.py"
+    text = source.read_text()
+    source.write_text(text + "\n# an edit\n")
+    try:
+        status = dvc(["status"], repo).stdout
+    finally:
+        source.write_text(text)
+    stale = set(re.findall(r"^(\S+):\s*$", status, re.M))
+    assert {"hough_lines@ours", "hough_lines@opencv"} <= stale, status
+    assert not {s for s in stale if s.split("_")[0] in ("homography", "defect", "logo", "stereo", "panorama")}, status
+    assert dvc(["status"], repo).stdout.strip().endswith("Data and pipelines are up to date."), "restored"
+
+
 def test_matching_param_change_reruns_matching_only(reproduced):
     repo, _ = reproduced
     params = repo / "params.yaml"
