@@ -259,6 +259,17 @@ def test_compare_runs_summary():
         hough.compare_runs(ours, {**ref, "images": []})
 
 
+def test_compare_runs_counts_the_lines_of_both_over_all_images():
+    # a threshold experiment moves these (the headline metrics of `dvc exp show`), even where parity stays 1.0
+    two = [[10.0, 0.0, 50.0], [40.0, 0.5, 45.0]]
+    ours = {"rho": 1.0, "theta": math.pi / 180,
+            "images": [{"file": "a.png", "lines": two}, {"file": "b.png", "lines": two[:1]}]}
+    ref = {"rho": 1.0, "theta": math.pi / 180,
+           "images": [{"file": "a.png", "lines": two[:1]}, {"file": "b.png", "lines": two[:1]}]}
+    m = hough.compare_runs(ours, ref)
+    assert (m["lines_ours"], m["lines_opencv"]) == (3, 2)
+
+
 def test_compare_runs_takes_the_report_section_in_degrees():
     # a line 2 degrees off the truth: found within theta_tol_deg = 2.5, missed at 1.5 (so the degrees are converted,
     # not read as radians, which would accept it at either); rho is exact, so rho_tol does not decide

@@ -234,7 +234,8 @@ def compare_runs(ours: dict, opencv: dict, truth: dict | None = None, params: Ho
     -------
     dict
         ``per_image`` entries and the summary: ``parity_min``/``parity_mean`` (share of OpenCV's lines in the same
-        cell), ``identical_images`` (same lines, votes and order) and, when any image has truth,
+        cell), ``identical_images`` (same lines, votes and order), ``lines_ours``/``lines_opencv`` (lines found
+        over all images) and, when any image has truth,
         ``recall_ours``/``recall_opencv`` (true lines found within the tolerances) and ``truth_images``.
 
     Examples
@@ -271,6 +272,7 @@ def compare_runs(ours: dict, opencv: dict, truth: dict | None = None, params: Ho
     parity = [r["parity"] for r in rows]
     out = {"images": len(rows), "parity_min": min(parity, default=1.0), "parity_mean": float(np.mean(parity or [1.0])),
            "identical_images": sum(r["identical"] for r in rows), "truth_images": len(found["ours"]),
+           "lines_ours": sum(r["our_lines"] for r in rows), "lines_opencv": sum(r["ref_lines"] for r in rows),
            "per_image": rows}
     for key, hits in found.items():
         if hits:
