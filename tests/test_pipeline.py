@@ -1,6 +1,7 @@
 """The DVC pipeline caches and reruns the way DVC users expect (on a fresh copy of this repository)."""
 
 import re
+import sys
 import time
 
 import pytest
@@ -143,6 +144,31 @@ def test_own_images_without_truth_through_dvc_exp_run(reproduced, task):
         # the headline only (without truth: counts and shares that need none); the per-item figures are details
         assert any(f'"{k}"' in metrics_text for k in HEADLINE[task]), metrics_text[:300]
         assert names[0] not in metrics_text, f"{task}: per-item figures belong in the details file, not the metrics"
+    finally:
+        subprocess.run(["git", "checkout", "--", "params.yaml", "dvc.lock"], cwd=repo, check=False)
+        subprocess.run(["git", "checkout", "--", "outputs"], cwd=repo, check=False)
+
+
+def test_one_parameter_experiment_reads_in_120_columns(reproduced):
+    # the README's `dvc exp show --only-changed --drop 'outputs/|data/'` after a one-parameter experiment: the
+    # changed parameter and the headline metrics it moved, none cut off (rich marks a cut column with an ellipsis)
+    import subprocess
+
+    from pipeline_copy import run_env
+
+    repo, _ = reproduced
+    try:
+        dvc(["exp", "run", "-n", "threshold-140", "-S", "hough.lines.threshold=140"], repo)
+        shown = subprocess.run([sys.executable, "-m", "dvc", "exp", "show", "--only-changed", "--drop",
+                                "outputs/|data/", "--no-pager"], cwd=repo, env={**run_env(), "COLUMNS": "120"},
+                               capture_output=True, text=True, check=True).stdout
+        lines = [ln for ln in shown.splitlines() if ln.strip()]
+        assert max(len(ln) for ln in lines) <= 120 and "\u2026" not in shown, shown
+        header = lines[1]
+        for column in ("hough.lines.threshold", "hough.all.lines_ours", "hough.all.lines_opencv"):
+            assert column in header, shown
+        row = next(ln for ln in lines if "threshold-140" in ln)
+        assert " 140 " in f"{row} ", shown
     finally:
         subprocess.run(["git", "checkout", "--", "params.yaml", "dvc.lock"], cwd=repo, check=False)
         subprocess.run(["git", "checkout", "--", "outputs"], cwd=repo, check=False)
