@@ -87,6 +87,34 @@ def test_a_code_change_reruns_the_stages_that_run_that_code(reproduced):
     assert dvc(["status"], repo).stdout.strip().endswith("Data and pipelines are up to date."), "restored"
 
 
+def test_one_parameter_experiment_reads_in_120_columns(reproduced):
+    # the README's `dvc exp show --only-changed --drop 'outputs/|data/'` after a one-parameter experiment: the
+    # changed parameter and the headline metrics it moved, none cut off (rich marks a cut column with an ellipsis).
+    # It runs before the own-images experiments of this module: --only-changed compares every experiment shown
+    import subprocess
+
+    from pipeline_copy import run_env
+
+    repo, _ = reproduced
+    try:
+        dvc(["exp", "run", "-n", "threshold-140", "-S", "hough.lines.threshold=140"], repo)
+        shown = subprocess.run([sys.executable, "-m", "dvc", "exp", "show", "--only-changed", "--drop",
+                                "outputs/|data/", "--no-pager"], cwd=repo, env={**run_env(), "COLUMNS": "120"},
+                               capture_output=True, text=True, check=True).stdout
+        lines = [ln for ln in shown.splitlines() if ln.strip()]
+        assert max(len(ln) for ln in lines) <= 120 and "\u2026" not in shown, shown
+        header = lines[1]
+        for column in ("hough.lines.threshold", "hough.all.lines_ours", "hough.all.lines_opencv"):
+            assert column in header, shown
+        row = next(ln for ln in lines if "threshold-140" in ln)
+        assert " 140 " in f"{row} ", shown
+    finally:  # the workspace as before, for the tests after this one
+        subprocess.run(["git", "checkout", "--", "params.yaml", "dvc.lock", "outputs"], cwd=repo, check=False)
+        subprocess.run([sys.executable, "-m", "dvc", "checkout", "-q"], cwd=repo, env=run_env(), check=False)
+        subprocess.run([sys.executable, "-m", "dvc", "exp", "remove", "threshold-140"], cwd=repo, env=run_env(),
+                       check=False, capture_output=True)
+
+
 def test_matching_param_change_reruns_matching_only(reproduced):
     repo, _ = reproduced
     params = repo / "params.yaml"
@@ -148,27 +176,3 @@ def test_own_images_without_truth_through_dvc_exp_run(reproduced, task):
         subprocess.run(["git", "checkout", "--", "params.yaml", "dvc.lock"], cwd=repo, check=False)
         subprocess.run(["git", "checkout", "--", "outputs"], cwd=repo, check=False)
 
-
-def test_one_parameter_experiment_reads_in_120_columns(reproduced):
-    # the README's `dvc exp show --only-changed --drop 'outputs/|data/'` after a one-parameter experiment: the
-    # changed parameter and the headline metrics it moved, none cut off (rich marks a cut column with an ellipsis)
-    import subprocess
-
-    from pipeline_copy import run_env
-
-    repo, _ = reproduced
-    try:
-        dvc(["exp", "run", "-n", "threshold-140", "-S", "hough.lines.threshold=140"], repo)
-        shown = subprocess.run([sys.executable, "-m", "dvc", "exp", "show", "--only-changed", "--drop",
-                                "outputs/|data/", "--no-pager"], cwd=repo, env={**run_env(), "COLUMNS": "120"},
-                               capture_output=True, text=True, check=True).stdout
-        lines = [ln for ln in shown.splitlines() if ln.strip()]
-        assert max(len(ln) for ln in lines) <= 120 and "\u2026" not in shown, shown
-        header = lines[1]
-        for column in ("hough.lines.threshold", "hough.all.lines_ours", "hough.all.lines_opencv"):
-            assert column in header, shown
-        row = next(ln for ln in lines if "threshold-140" in ln)
-        assert " 140 " in f"{row} ", shown
-    finally:
-        subprocess.run(["git", "checkout", "--", "params.yaml", "dvc.lock"], cwd=repo, check=False)
-        subprocess.run(["git", "checkout", "--", "outputs"], cwd=repo, check=False)
