@@ -8,8 +8,16 @@ prints that line and leaves at once with ``os._exit(130)``: temporaries are clea
 killed process. A handler that never raises may run anywhere, also inside a Python callback of numba's compiled
 code, which must not fail.
 
-:func:`finish` ends a program: SIGINT is ignored from then on (the interpreter's shutdown, numba's threads), and an
-interrupt that arrived during the work but was never checked still turns the exit status into 130.
+:func:`finish` decides a program's exit status: an interrupt that arrived during the work but was never checked
+turns it into 130. The handler stays in place through the interpreter's shutdown (its ``atexit`` functions,
+numba's and dask's threads): the last ``atexit`` function blocks SIGINT, and a Ctrl-C that arrived at any moment
+before it still ends the process with 130 and the one line. It then leaves with ``os._exit`` and the decided status
+(the standard streams flushed), so no SIGINT can arrive in a shutdown phase where Python has put back the default
+action, which would kill the process by the signal.
+
+:func:`results_out` marks that a command's results are going out: from then on an interrupt no longer cuts them
+short (only a second Ctrl-C does, at once) and no record follows them on stdout; the first one still ends the
+program with 130 and the line on stderr once they are out.
 
 Without :func:`install` (cvpipe used as a library) nothing changes: Ctrl-C raises ``KeyboardInterrupt`` as usual and
 :func:`check` only acts on :func:`mark`. This module imports only the standard library: the entry point installs the
@@ -18,6 +26,7 @@ handler before anything heavy is imported.
 
 from __future__ import annotations
 
+import atexit
 import os
 import signal
 import sys
@@ -34,6 +43,10 @@ _installed = False
 #: what an interrupted program prints: the line on stderr, and the record on stdout (None: no record)
 _line = "cvpipe: error: interrupted"
 _record: str | None = None
+#: True once the results are going out (:func:`results_out`)
+_going_out = False
+#: the exit status :func:`finish` decided (None: not yet), with which the last ``atexit`` function leaves
+_status: int | None = None
 
 
 def install(line: str = "cvpipe: error: interrupted", record: str | None = None) -> bool:
@@ -60,6 +73,9 @@ def install(line: str = "cvpipe: error: interrupted", record: str | None = None)
     if signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
         return False
     signal.signal(signal.SIGINT, _on_sigint)
+    # registered before anything but the standard library is imported: ``atexit`` runs its functions last in,
+    # first out, so this one runs after every other one
+    atexit.register(_leave)
     _installed = True
     return True
 
@@ -83,8 +99,9 @@ def mark() -> None:
 
 
 def check() -> None:
-    """Raise ``KeyboardInterrupt`` when an interrupt was recorded; called between items and steps."""
-    if _seen:
+    """Raise ``KeyboardInterrupt`` when an interrupt was recorded (until the results go out); called between items
+    and steps."""
+    if _seen and not _going_out:
         raise KeyboardInterrupt
 
 
@@ -125,19 +142,49 @@ def exit_now() -> None:
     os._exit(130)
 
 
+def results_out() -> None:
+    """Mark that the program's results are going out (files, then stdout): from here on :func:`check` no longer
+    raises, and an interrupt is said by its line alone (see the module docstring)."""
+    global _record, _going_out
+    _record = None
+    _going_out = True
+
+
 def finish(code: int | str | None) -> int | str | None:
     """The exit status of a program whose work returned ``code``: 130 (with :func:`say`) when an interrupt arrived
     that nothing checked after it and the program had not already ended as interrupted (130), else ``code``.
 
-    With the handler installed, SIGINT is ignored from here on: Python restores the default action of a handled
-    signal while it shuts down, so a Ctrl-C then would kill the process by SIGINT instead of letting it end with the
-    status of its finished work.
+    With the handler installed, a Ctrl-C after this call, up to the end of the interpreter's shutdown, still ends
+    the program with 130 (see the module docstring); after an interrupt already said (130) SIGINT is ignored, so
+    that the line is not said twice.
     """
-    ignore()
+    global _status
     if _seen and code != 130:
         say()
-        return 130
+        code = 130
+    if code == 130:
+        ignore()
+    _status = 0 if code is None else code if isinstance(code, int) else 1  # sys.exit's statuses: a message is 1
     return code
+
+
+def _leave() -> None:
+    """The last ``atexit`` function of a program that :func:`install` set up: SIGINT blocked (a late one stays
+    pending instead of killing the process), the streams flushed, then ``os._exit`` with 130 when an interrupt
+    came after :func:`finish` (said here), else with the status :func:`finish` decided."""
+    if _status is None:  # the program did not get to finish(): Python's own shutdown, deaf to Ctrl-C
+        ignore()
+        return
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError, AttributeError):
+            pass
+    if _status != 130 and (_seen or signal.SIGINT in signal.sigpending()):
+        say()
+        os._exit(130)
+    os._exit(_status)
 
 
 def run(main: Callable[[], int | str | None]) -> int | str | None:

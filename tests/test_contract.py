@@ -256,8 +256,9 @@ def _interrupt_stereo(cmd, out, delay, peak=None, second=None):
     """Run ``cmd`` and send SIGINT ``delay`` seconds after its start (``peak`` None: start-up) or after it reached
     ``peak`` threads (the parallel kernels), and a second one ``second`` seconds after the first (None: one only).
 
-    Returns ``(proc, stdout, stderr)`` for a run that ended as interrupted; None for one that finished its work
-    first (exit 0 and its complete result, checked here: the signal came after its results went out)."""
+    Returns ``(proc, stdout, stderr)`` for a run that ended as interrupted before its results went out; None for
+    one whose results went out whole (checked here): exit 0 when the signal came after the process ended, or 130
+    and the one line when it came while they went out or during the shutdown."""
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=dict(ENV, NUMBA_NUM_THREADS="2"))
     t0 = time.monotonic()
@@ -276,8 +277,9 @@ def _interrupt_stereo(cmd, out, delay, peak=None, second=None):
     stdout, stderr = proc.communicate(timeout=300)
     # never a signal: not a crash (-11), not death by SIGINT (-2)
     assert proc.returncode in (0, 130), (delay, second, proc.returncode, stderr)
-    if proc.returncode == 0:
-        assert stderr == "" and "valid_fraction" in json.loads(stdout) and (out / "d.npy").exists(), stderr
+    if proc.returncode == 0 or (proc.returncode == 130 and "valid_fraction" in stdout):
+        assert stderr == ("" if proc.returncode == 0 else "cvpipe: error: interrupted\n"), stderr
+        assert "valid_fraction" in json.loads(stdout) and (out / "d.npy").exists(), stdout
         (out / "d.npy").unlink()
         return None
     return proc, stdout, stderr
@@ -379,6 +381,57 @@ def test_first_ctrl_c_is_recorded_and_the_second_ends_the_process_at_once(tmp_pa
     assert proc.stderr == "cvpipe: error: interrupted\n" and proc.stdout == '{"error": "interrupted"}\n'
     # "at once": the script would sleep 5 s after the second SIGINT; start-up takes well under a second
     assert time.monotonic() - t0 < 5
+
+
+def test_ctrl_c_while_the_results_go_out_leaves_them_whole_and_ends_with_130(tmp_path):
+    """A Ctrl-C after the work is done no longer cuts the results short: check() stops raising, the results go out
+    whole, then the program ends with 130 and the line on stderr (no failure record after the results on stdout)."""
+    script = tmp_path / "results.py"
+    script.write_text(textwrap.dedent("""
+        import os, signal, sys
+        from cvpipe import interrupt
+        from cvpipe.commands import final_output
+        assert interrupt.install(record='{"error": "interrupted"}')
+        final_output()
+        os.kill(os.getpid(), signal.SIGINT)
+        interrupt.check()  # does not raise: the results are going out
+        print('{"lines": 3}')
+        sys.exit(interrupt.finish(0))
+    """))
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=ENV, timeout=120)
+    assert (proc.returncode, proc.stdout, proc.stderr) == (130, '{"lines": 3}\n', "cvpipe: error: interrupted\n")
+
+
+@pytest.mark.parametrize("moment", ["after finish", "during the shutdown"])
+def test_ctrl_c_after_the_work_up_to_the_process_end_is_not_lost(tmp_path, moment):
+    """A SIGINT after finish() decided the exit status, up to the end of the interpreter's shutdown (here from an
+    ``atexit`` function, which runs before the handler's own last one), still ends the program with 130 and the
+    one line: never exit 0 as if no Ctrl-C came, never death by SIGINT (-2)."""
+    script = tmp_path / "late.py"
+    script.write_text(textwrap.dedent(f"""
+        import atexit, os, signal, sys
+        from cvpipe import interrupt
+        assert interrupt.install()
+        print("done")
+        code = interrupt.finish(0)
+        if {moment!r} == "after finish":
+            os.kill(os.getpid(), signal.SIGINT)
+        else:
+            atexit.register(os.kill, os.getpid(), signal.SIGINT)
+        sys.exit(code)
+    """))
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=ENV, timeout=120)
+    assert (proc.returncode, proc.stdout, proc.stderr) == (130, "done\n", "cvpipe: error: interrupted\n")
+
+
+def test_exit_status_and_message_pass_through_the_handlers_last_step(tmp_path):
+    """Without a Ctrl-C the program's own status leaves unchanged: a number as it is, a message as 1 (printed)."""
+    for code, expected in (("0", 0), ("3", 3), ("'a message'", 1), ("None", 0)):
+        proc = subprocess.run([sys.executable, "-c", "import sys\nfrom cvpipe import interrupt\n"
+                               f"interrupt.install()\nsys.exit(interrupt.finish({code}))"],
+                              capture_output=True, text=True, env=ENV, timeout=120)
+        assert proc.returncode == expected, (code, proc.stderr)
+        assert proc.stderr == ("a message\n" if expected == 1 else "")
 
 
 def test_ctrl_c_when_sigint_is_ignored_changes_nothing(tmp_path):

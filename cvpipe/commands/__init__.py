@@ -84,12 +84,13 @@ def step(name: str) -> Iterator[None]:
 def final_output() -> None:
     """Mark where the command's work is done and its results go out (files, then stdout).
 
-    An interrupt recorded before this point ends the command here (exit 130, nothing of the results written); a
-    Ctrl-C from here on is ignored (:func:`cvpipe.interrupt.ignore`), so the results are never cut short, and an
-    interrupt's record never follows them on stdout.
+    An interrupt recorded before this point ends the command here (exit 130, nothing of the results written). One
+    from here on no longer cuts the results short (:func:`cvpipe.interrupt.results_out`): they are written whole,
+    and the command then ends with exit 130 and the line on stderr (no failure record follows them on stdout); a
+    second Ctrl-C still ends the process at once, leaving whole files or none.
     """
-    interrupt.ignore()
     interrupt.check()
+    interrupt.results_out()
 
 
 def note(message: str) -> None:
