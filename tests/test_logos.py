@@ -138,6 +138,21 @@ def test_the_same_picture_under_two_brands_is_refused_naming_both(marks):
     assert logo.build_gallery(same_brand).brands == ("brand0",)
 
 
+def test_a_copy_inside_its_own_brand_still_finds_the_brand(marks):
+    """Duplicate gallery images of one brand never cancel it: the ratio test weighs a brand's nearest descriptor
+    against other brands only, so the copy's identical descriptors are no rival, and the brand is found with as
+    many verified matches as without the copy (a copy can split the matches between the two references: at least
+    90 % of them stay with the one that wins)."""
+    gray = {b: cv2.cvtColor(m, cv2.COLOR_BGR2GRAY) for b, m in marks.items()}
+    refs = [logo.Reference(b, f"{b}.png", detect(g, "sift"), (200, 200)) for b, g in gray.items()]
+    copy = logo.Reference("brand0", "brand0_copy.png", refs[0].features, (200, 200))
+    scene = detect(_scene(marks["brand0"], _view((300, 240), 0.8, 0, PERSP)), "sift")
+    alone = logo.recognize(logo.build_gallery(refs), scene, (640, 480), rng=0)
+    doubled = logo.recognize(logo.build_gallery(refs + [copy]), scene, (640, 480), rng=0)
+    assert alone.brand == doubled.brand == "brand0"
+    assert doubled.best.matches >= 0.9 * alone.best.matches >= LogoVerifyParams().min_matches
+
+
 def test_gallery_over_the_memory_budget_is_refused_naming_what_to_change(marks, monkeypatch):
     refs = [logo.Reference(b, f"{b}.png", detect(cv2.cvtColor(m, cv2.COLOR_BGR2GRAY), "sift"), (200, 200))
             for b, m in marks.items()]
