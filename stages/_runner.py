@@ -295,8 +295,11 @@ def path_param(path: str | os.PathLike, key: str) -> str:
             raise InputError(f"{path}: parameter `{key}` is missing")
         node = node[part]
     if not isinstance(node, str) or not node.strip() or "\0" in node:
+        hint = ""
+        if isinstance(node, (int, float)) and not isinstance(node, bool):  # `-S t.data=123`: YAML reads a number
+            hint = f"; a folder named like a number is given quoted: -S '{key}=\"{node}\"'"
         raise InputError(f"`{key}` must be a folder path (a non-empty string), got {node!r} "
-                         f"({type(node).__name__}) in {path}", file=str(path))
+                         f"({type(node).__name__}) in {path}{hint}", file=str(path))
     return node
 
 

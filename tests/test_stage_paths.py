@@ -1,6 +1,7 @@
 """A user's folder name reaches a stage intact and never as shell text: ``dvc.yaml``'s commands name the parameter
 (``--images-param hough.data``) and the stage reads its value from ``params.yaml``."""
 
+import os
 import re
 import subprocess
 import sys
@@ -36,7 +37,7 @@ def test_every_data_folder_is_passed_by_its_parameter_name():
     """Each stage that depends on a ``<task>.data`` folder is told that parameter's name in its ``cmd``."""
     for name, spec in _stages().items():
         for dep in spec.get("deps", []):
-            m = re.fullmatch(r"\$\{(\w+\.data)\}", str(dep))
+            m = re.fullmatch(r"\$\{(\w+\.data)\}/?", str(dep))
             if m:
                 assert f"-param {m.group(1)} " in spec["cmd"] + " ", f"{name} does not read {m.group(1)} by name"
 
@@ -87,7 +88,8 @@ def test_a_data_parameter_that_is_not_a_path_is_one_line_naming_it(tmp_path):
                           text=True)
     assert proc.returncode == 2
     assert proc.stderr.strip().splitlines() == [
-        "hough_edges: error: `hough.data` must be a folder path (a non-empty string), got 123 (int) in params.yaml"]
+        "hough_edges: error: `hough.data` must be a folder path (a non-empty string), got 123 (int) in params.yaml; "
+        "a folder named like a number is given quoted: -S 'hough.data=\"123\"'"]
     assert not (tmp_path / "o").exists()
 
 
@@ -105,7 +107,30 @@ def test_path_param_names_a_missing_parameter(tmp_path):
     (tmp_path / "p.yaml").write_text(yaml.safe_dump({"t": {"other": 1}}))
     with pytest.raises(InputError, match=r"parameter `t\.data` is missing"):
         path_param(tmp_path / "p.yaml", "t.data")
-    assert path_param(tmp_path / "p.yaml", "t.other") if False else True
+
+
+def test_every_data_folder_dependency_is_templated_into_a_path(tmp_path):
+    """``dvc.yaml`` names each data folder as ``${<task>.data}/``: a value that YAML reads as a number
+    (``-S panorama.data=123``) becomes the path ``123/`` (DVC's own templating fails with "'int' object has no
+    attribute 'decode'" on a dependency that is a bare number), and an absolute path stays absolute."""
+    for name, spec in _stages().items():
+        for dep in spec.get("deps", []):
+            assert not re.fullmatch(r"\$\{(\w+\.data)\}", str(dep)), f"{name}: {dep} is not templated into a path"
+    repo = tmp_path / "repo"
+    repo.mkdir()
+    (repo / "dvc.yaml").write_text((ROOT / "dvc.yaml").read_text(encoding="utf-8"), encoding="utf-8")
+    params = yaml.safe_load((ROOT / "params.yaml").read_text(encoding="utf-8"))
+    params["panorama"]["data"] = 123
+    params["hough"]["data"] = str(tmp_path / "absolute")  # outside the repository: DVC shows it as it is
+    (repo / "params.yaml").write_text(yaml.safe_dump(params), encoding="utf-8")
+    env = dict(os.environ, DVC_NO_ANALYTICS="1", PATH=f"{sys.executable.rsplit('/', 1)[0]}:{os.environ['PATH']}")
+    subprocess.run([sys.executable, "-m", "dvc", "init", "--no-scm", "-q"], cwd=repo, env=env, check=True)
+    proc = subprocess.run([sys.executable, "-m", "dvc", "status", "panorama_features", "hough_edges"], cwd=repo,
+                          env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    # both folders are missing: DVC lists them as deleted dependencies, under the paths the values name
+    assert re.search(r"deleted:\s+123/?\n", proc.stdout), proc.stdout
+    assert re.search(rf"deleted:\s+{re.escape(str(tmp_path))}/absolute/?\n", proc.stdout), proc.stdout
 
 
 def test_path_param_returns_the_value_unchanged(tmp_path):
