@@ -425,6 +425,9 @@ _MAD_TO_SIGMA = 1.4826
 _MIN_C = 0.05
 #: rounds of Sampson-reweighted 8-point refitting of the final model
 _REFINE_ROUNDS = 10
+#: ...which stop early once a round moves the unit null vector of the 8-point system by less than this
+#: (``1 - |v . v_prev|``, about half the squared angle between them)
+_REFINE_TOL = 1e-12
 #: status of the 8-point solve: solved, fewer than 8 correspondences, rank-deficient normal matrix
 FM_OK = 0
 FM_TOO_FEW = 1
@@ -441,15 +444,6 @@ def _epi(F, x, y, u, v):  # pragma: no cover - compiled
     b0 = F[0, 0] * u + F[1, 0] * v + F[2, 0]
     b1 = F[0, 1] * u + F[1, 1] * v + F[2, 1]
     return u * a0 + v * a1 + a2, a0 * a0 + a1 * a1 + b0 * b0 + b1 * b1
-
-
-@njit(cache=True, error_model="numpy")
-def _sq_sampson(F, p1, p2, i):  # pragma: no cover - compiled
-    """Squared Sampson distance of correspondence ``i`` (inf where the gradient vanishes)."""
-    num, den = _epi(F, p1[i, 0], p1[i, 1], p2[i, 0], p2[i, 1])
-    if den > 0.0:
-        return num * num / den
-    return np.inf
 
 
 @njit(cache=True, error_model="numpy")
@@ -483,57 +477,63 @@ def _truncated_sampson(f00, f01, f02, f10, f11, f12, f20, f21, f22, x, y, u, v, 
 
 
 @njit(cache=True, error_model="numpy")
-def _msac_block(F, p1, p2, thr2, start, stop):  # pragma: no cover - compiled
-    """``sum_i min(d_i^2, thr2)`` for i in [start, stop), in four interleaved partial sums added in a fixed order:
-    the compiler can run them on SIMD lanes without reassociating, so the sum is the same on every CPU."""
+def _msac_block(F, q, thr2, start, stop, buf):  # pragma: no cover - compiled
+    """``sum_i min(d_i^2, thr2)`` for i in [start, stop) (``buf``: scratch of at least ``_COST_BLOCK``).
+
+    The terms go to ``buf`` in one loop over the rows of ``q`` that the compiler runs on SIMD lanes, then they are
+    added in four interleaved partial sums in a fixed order: the sum is the same on every CPU."""
     f00, f01, f02 = F[0, 0], F[0, 1], F[0, 2]
     f10, f11, f12 = F[1, 0], F[1, 1], F[1, 2]
     f20, f21, f22 = F[2, 0], F[2, 1], F[2, 2]
+    x1, y1, x2, y2 = q[0], q[1], q[2], q[3]
+    m = stop - start
+    for j in range(m):
+        i = start + j
+        buf[j] = _truncated_sampson(f00, f01, f02, f10, f11, f12, f20, f21, f22, x1[i], y1[i], x2[i], y2[i], thr2)
     c0 = c1 = c2 = c3 = 0.0
-    full = start + (stop - start) - (stop - start) % 4
-    for i in range(start, full, 4):
-        c0 += _truncated_sampson(f00, f01, f02, f10, f11, f12, f20, f21, f22, p1[i, 0], p1[i, 1], p2[i, 0],
-                                 p2[i, 1], thr2)
-        c1 += _truncated_sampson(f00, f01, f02, f10, f11, f12, f20, f21, f22, p1[i + 1, 0], p1[i + 1, 1],
-                                 p2[i + 1, 0], p2[i + 1, 1], thr2)
-        c2 += _truncated_sampson(f00, f01, f02, f10, f11, f12, f20, f21, f22, p1[i + 2, 0], p1[i + 2, 1],
-                                 p2[i + 2, 0], p2[i + 2, 1], thr2)
-        c3 += _truncated_sampson(f00, f01, f02, f10, f11, f12, f20, f21, f22, p1[i + 3, 0], p1[i + 3, 1],
-                                 p2[i + 3, 0], p2[i + 3, 1], thr2)
-    for i in range(full, stop):
-        c0 += _truncated_sampson(f00, f01, f02, f10, f11, f12, f20, f21, f22, p1[i, 0], p1[i, 1], p2[i, 0],
-                                 p2[i, 1], thr2)
+    full = m - m % 4
+    for j in range(0, full, 4):
+        c0 += buf[j]
+        c1 += buf[j + 1]
+        c2 += buf[j + 2]
+        c3 += buf[j + 3]
+    for j in range(full, m):
+        c0 += buf[j]
     return (c0 + c1) + (c2 + c3)
 
 
 @njit(cache=True, error_model="numpy")
-def _msac_from(F, p1, p2, thr2, block, cost, bail):  # pragma: no cover - compiled
+def _msac_from(F, q, thr2, block, cost, bail, buf):  # pragma: no cover - compiled
     """The MSAC cost of F given ``cost``, the sum over the blocks before ``block``; inf as soon as the partial sum
     exceeds ``bail``."""
-    n = p1.shape[0]
+    n = q.shape[1]
     for start in range(block * _COST_BLOCK, n, _COST_BLOCK):
-        cost += _msac_block(F, p1, p2, thr2, start, min(start + _COST_BLOCK, n))
+        cost += _msac_block(F, q, thr2, start, min(start + _COST_BLOCK, n), buf)
         if cost > bail:
             return np.inf
     return cost
 
 
 @njit(cache=True, error_model="numpy")
-def msac_cost(F, p1, p2, thr2, bail):  # pragma: no cover - compiled
+def msac_cost(F, q, thr2, bail):  # pragma: no cover - compiled
     """``sum_i min(d_i^2, thr2)`` over the Sampson distances d of F (summed by blocks of ``_COST_BLOCK``); inf as
     soon as the partial sum exceeds ``bail`` (then F cannot be among the models the caller keeps; ``bail = inf``
-    gives the plain cost)."""
-    return _msac_from(F, p1, p2, thr2, 0, 0.0, bail)
+    gives the plain cost). ``q``: (4, N) rows x1, y1, x2, y2 of the correspondences."""
+    return _msac_from(F, q, thr2, 0, 0.0, bail, np.empty(_COST_BLOCK))
 
 
 @njit(cache=True, error_model="numpy")
-def count_within(F, p1, p2, thr2, mask):  # pragma: no cover - compiled
-    """``mask[i]``: squared Sampson distance of i under F at most ``thr2``; returns the count."""
-    cnt = 0
-    for i in range(p1.shape[0]):
-        mask[i] = _sq_sampson(F, p1, p2, i) <= thr2
-        cnt += mask[i]
-    return cnt
+def count_within(F, q, thr2, mask):  # pragma: no cover - compiled
+    """``mask[i]``: squared Sampson distance of i under F at most ``thr2`` (``q`` as for :func:`msac_cost`);
+    returns the count."""
+    x1, y1, x2, y2 = q[0], q[1], q[2], q[3]
+    for i in range(q.shape[1]):
+        num, den = _epi(F, x1[i], y1[i], x2[i], y2[i])
+        mask[i] = (num * num / den if den > 0.0 else np.inf) <= thr2
+    count = 0
+    for i in range(q.shape[1]):
+        count += mask[i]
+    return count
 
 
 @njit(cache=True, error_model="numpy")
@@ -671,11 +671,11 @@ def _smallest_warm(M, V):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def design_products(x1n, x2n, PT):  # pragma: no cover - compiled
-    """``PT[6 a + b, i] = q_a r_b`` for correspondence i, q = (u^2, uv, u, v^2, v, 1) of x2n = (u, v) and
+def design_products(x1n, x2n, P):  # pragma: no cover - compiled
+    """``P[i, 6 a + b] = q_a r_b`` for correspondence i, q = (u^2, uv, u, v^2, v, 1) of x2n = (u, v) and
     r = (x^2, xy, x, y^2, y, 1) of x1n = (x, y): the normal matrix of the 8-point system with squared weights w2 is
-    ``PT @ w2`` (see :func:`eight_point_solve`). Computed once per point set, as the points do not change between
-    the reweighting rounds."""
+    ``w2 @ P`` (see :func:`eight_point_solve`). Computed once per point set, as the points do not change between
+    the reweighting rounds; a row per correspondence, so that the 36 sums advance together (SIMD across them)."""
     for i in range(x1n.shape[0]):
         x = x1n[i, 0]
         y = x1n[i, 1]
@@ -695,35 +695,35 @@ def design_products(x1n, x2n, PT):  # pragma: no cover - compiled
                 q = v
             else:
                 q = 1.0
-            PT[6 * a, i] = q * r0
-            PT[6 * a + 1, i] = q * r1
-            PT[6 * a + 2, i] = q * r2
-            PT[6 * a + 3, i] = q * r3
-            PT[6 * a + 4, i] = q * r4
-            PT[6 * a + 5, i] = q
-    return PT
+            P[i, 6 * a] = q * r0
+            P[i, 6 * a + 1] = q * r1
+            P[i, 6 * a + 2] = q * r2
+            P[i, 6 * a + 3] = q * r3
+            P[i, 6 * a + 4] = q * r4
+            P[i, 6 * a + 5] = q
+    return P
 
 
 @njit(cache=True, error_model="numpy")
-def _normal_sums(PT, w2, S):  # pragma: no cover - compiled
-    """``S = PT @ w2``: 36 dot products, each in eight interleaved partial sums added in a fixed order (SIMD lanes
-    without reassociation: the same sums on every CPU)."""
+def _normal_sums(P, w2, S):  # pragma: no cover - compiled
+    """``S = w2 @ P``: 36 sums, each over the correspondences in their order (the 36 advance together as SIMD
+    lanes; no sum is reassociated, so it is the same on every CPU). Correspondences of weight 0 are skipped."""
+    m = P.shape[1]  # 36; not a constant, so that the loops over it are vectorized rather than unrolled
     n = w2.shape[0]
-    full = n - n % 8
-    for k in range(36):
-        t0 = t1 = t2 = t3 = t4 = t5 = t6 = t7 = 0.0
-        for i in range(0, full, 8):
-            t0 += PT[k, i] * w2[i]
-            t1 += PT[k, i + 1] * w2[i + 1]
-            t2 += PT[k, i + 2] * w2[i + 2]
-            t3 += PT[k, i + 3] * w2[i + 3]
-            t4 += PT[k, i + 4] * w2[i + 4]
-            t5 += PT[k, i + 5] * w2[i + 5]
-            t6 += PT[k, i + 6] * w2[i + 6]
-            t7 += PT[k, i + 7] * w2[i + 7]
-        for i in range(full, n):
-            t0 += PT[k, i] * w2[i]
-        S[k] = ((t0 + t1) + (t2 + t3)) + ((t4 + t5) + (t6 + t7))
+    full = n - n % 4
+    for k in range(m):
+        S[k] = 0.0
+    for i in range(0, full, 4):
+        w0 = w2[i]
+        w1 = w2[i + 1]
+        w2_ = w2[i + 2]
+        w3 = w2[i + 3]
+        for k in range(m):
+            S[k] += (P[i, k] * w0 + P[i + 1, k] * w1) + (P[i + 2, k] * w2_ + P[i + 3, k] * w3)
+    for i in range(full, n):
+        w = w2[i]
+        for k in range(m):
+            S[k] += P[i, k] * w
 
 
 @njit(cache=True, error_model="numpy")
@@ -994,7 +994,7 @@ def seven_point(x1n, x2n, pick, Fns, A, F1, F2, D, roots, perm):  # pragma: no c
 
 
 @njit(cache=True, error_model="numpy")
-def ransac_batch(u, x1n, x2n, p1, p2, T1, T2, thr2, keep, models, costs):  # pragma: no cover - compiled
+def ransac_batch(u, x1n, x2n, q, T1, T2, thr2, keep, models, costs):  # pragma: no cover - compiled
     """Solve (:func:`seven_point`) and score the 7-point samples drawn from the uniforms ``u`` (K, 7).
 
     Each solution goes to ``models`` in pixel coordinates with its MSAC cost in ``costs``. A model whose partial
@@ -1003,8 +1003,9 @@ def ransac_batch(u, x1n, x2n, p1, p2, T1, T2, thr2, keep, models, costs):  # pra
     block of correspondences and the models are finished in the order of those partial costs; the finished costs do
     not depend on that order. Returns (models, samples that gave a model).
     """
-    n = p1.shape[0]
+    n = q.shape[1]
     pick = np.empty(7, np.int64)
+    buf = np.empty(_COST_BLOCK)
     chosen = np.empty(7, np.int64)
     Fns = np.empty((3, 3, 3))
     tmp = np.empty((3, 3))
@@ -1025,11 +1026,11 @@ def ransac_batch(u, x1n, x2n, p1, p2, T1, T2, thr2, keep, models, costs):  # pra
         for r in range(nr):
             F = models[m]
             denormalize(Fns[r], T1, T2, tmp, F)
-            costs[m] = _msac_block(F, p1, p2, thr2, 0, min(_COST_BLOCK, n))
+            costs[m] = _msac_block(F, q, thr2, 0, min(_COST_BLOCK, n), buf)
             m += 1
     low = np.full(keep, np.inf)  # the lowest costs of the batch so far, ascending
     for j in np.argsort(costs[:m]):
-        cost = _msac_from(models[j], p1, p2, thr2, 1, costs[j], low[keep - 1])
+        cost = _msac_from(models[j], q, thr2, 1, costs[j], low[keep - 1], buf)
         costs[j] = cost
         if cost < low[keep - 1]:
             t = keep - 1
@@ -1096,13 +1097,24 @@ def noise_cutoff(d, threshold, buf, squared):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def refit(PT, p1, p2, T1, T2, mask, rounds, w2, F, V, warm):  # pragma: no cover - compiled
-    """Sampson-reweighted normalized 8-point on ``mask`` (``rounds`` reweightings; ``w2``: scratch of len(p1)): F
-    in pixel coordinates, unit norm. ``PT``, ``V``, ``warm``: as for :func:`eight_point_solve`. Returns a status
+def _settled(prev, V):  # pragma: no cover - compiled
+    """True when the unit null vector ``V[:, 0]`` moved by less than ``_REFINE_TOL`` from ``prev`` (either sign)."""
+    dot = 0.0
+    for k in range(9):
+        dot += prev[k] * V[k, 0]
+    return 1.0 - abs(dot) <= _REFINE_TOL
+
+
+@njit(cache=True, error_model="numpy")
+def refit(PT, q, T1, T2, mask, rounds, w2, F, V, warm):  # pragma: no cover - compiled
+    """Sampson-reweighted normalized 8-point on ``mask`` (``rounds`` reweightings; ``w2``: scratch of N): F in
+    pixel coordinates, unit norm; ``q`` (4, N): rows x1, y1, x2, y2 of the correspondences. ``PT``, ``V``, ``warm``: as for :func:`eight_point_solve`. Returns a status
     (``FM_*``)."""
     Fn = np.empty((3, 3))
     tmp = np.empty((3, 3))
-    n = p1.shape[0]
+    prev = np.empty(9)
+    x1, y1, x2, y2 = q[0], q[1], q[2], q[3]
+    n = q.shape[1]
     cnt = 0
     for i in range(n):
         w2[i] = 1.0 if mask[i] else 0.0
@@ -1117,28 +1129,34 @@ def refit(PT, p1, p2, T1, T2, mask, rounds, w2, F, V, warm):  # pragma: no cover
         # eigenvector)
         for i in range(n):
             if mask[i]:
-                _, den = _epi(F, p1[i, 0], p1[i, 1], p2[i, 0], p2[i, 1])
+                _, den = _epi(F, x1[i], y1[i], x2[i], y2[i])
                 w2[i] = 1.0 / max(den, 1e-300)
+        for k in range(9):
+            prev[k] = V[k, 0]
         status = eight_point_solve(PT, w2, cnt, Fn, V, True)
         if status != FM_OK:
             return status
+        if _settled(prev, V):
+            break
     denormalize(Fn, T1, T2, tmp, F)
     unit(F)
     return FM_OK
 
 
 @njit(cache=True, error_model="numpy")
-def refit_robust(PT, p1, p2, T1, T2, F, threshold, rounds, d2, iden, w2, use, buf, V, warm):  # pragma: no cover
+def refit_robust(PT, q, T1, T2, F, threshold, rounds, d2, iden, w2, use, buf, V, warm):  # pragma: no cover
     """Iteratively reweighted 8-point of F (in place) over every correspondence, weights ``Tukey(d / c) / sqrt(den)``
     with the cut-off c of :func:`noise_cutoff` re-estimated each round; stops early when fewer than 8 fall within
     it. Works on squared distances and weights (no square root per correspondence). ``d2, iden, w2, use, buf``:
-    scratch of len(p1); ``V``, ``warm``: as for :func:`refit`. Returns a status (``FM_*``)."""
+    scratch of N; ``V``, ``warm``: as for :func:`refit`. Returns a status (``FM_*``)."""
     Fn = np.empty((3, 3))
     tmp = np.empty((3, 3))
-    n = p1.shape[0]
-    for _ in range(rounds):
+    prev = np.empty(9)
+    x1, y1, x2, y2 = q[0], q[1], q[2], q[3]
+    n = q.shape[1]
+    for r in range(rounds):
         for i in range(n):
-            num, de = _epi(F, p1[i, 0], p1[i, 1], p2[i, 0], p2[i, 1])
+            num, de = _epi(F, x1[i], y1[i], x2[i], y2[i])
             r = 1.0 / max(de, 1e-300)
             iden[i] = r
             d2[i] = num * num * r
@@ -1154,43 +1172,47 @@ def refit_robust(PT, p1, p2, T1, T2, F, threshold, rounds, d2, iden, w2, use, bu
             t = 1.0 - d2[i] / c2
             t *= t
             w2[i] = t * t * iden[i] if use[i] else 0.0
+        for k in range(9):
+            prev[k] = V[k, 0]
         status = eight_point_solve(PT, w2, cnt, Fn, V, warm)
         if status != FM_OK:
             return status
         warm = True
         denormalize(Fn, T1, T2, tmp, F)
         unit(F)
+        if r > 0 and _settled(prev, V):
+            break
     return FM_OK
 
 
 @njit(cache=True, error_model="numpy")
-def local_optimize(PT, p1, p2, T1, T2, F0, thr2, F):  # pragma: no cover - compiled
+def local_optimize(PT, q, T1, T2, F0, thr2, F):  # pragma: no cover - compiled
     """LO of a new so-far-best model: the unweighted 8-point model F of the correspondences within the threshold
     of F0. Returns (ok, MSAC cost of F)."""
-    n = p1.shape[0]
+    n = q.shape[1]
     mask = np.empty(n, np.bool_)
-    if count_within(F0, p1, p2, thr2, mask) < 8:
+    if count_within(F0, q, thr2, mask) < 8:
         return False, np.inf
-    if refit(PT, p1, p2, T1, T2, mask, 0, np.empty(n), F, np.empty((9, 9)), False) != FM_OK:
+    if refit(PT, q, T1, T2, mask, 0, np.empty(n), F, np.empty((9, 9)), False) != FM_OK:
         return False, np.inf
-    return True, msac_cost(F, p1, p2, thr2, np.inf)
+    return True, msac_cost(F, q, thr2, np.inf)
 
 
 @njit(cache=True, error_model="numpy")
-def _finish(PT, p1, p2, T1, T2, F, threshold, min_inliers, d, den, w, use, buf, mask, new, V):  # pragma: no cover
+def _finish(PT, q, T1, T2, F, threshold, min_inliers, d, den, w, use, buf, mask, new, V):  # pragma: no cover
     """The final refinement of one model (F in place): reweighted 8-point refits with inlier re-selection, then the
     robust refit. Returns a status (``FM_*``)."""
     thr2 = threshold * threshold
-    count_within(F, p1, p2, thr2, mask)
+    count_within(F, q, thr2, mask)
     warm = False
     for _ in range(2):  # refit, re-select inliers, refit (the inlier set settles in one or two rounds)
-        status = refit(PT, p1, p2, T1, T2, mask, _REFINE_ROUNDS, w, F, V, warm)
+        status = refit(PT, q, T1, T2, mask, _REFINE_ROUNDS, w, F, V, warm)
         warm = True
         if status != FM_OK:
             return status
-        cnt = count_within(F, p1, p2, thr2, new)
+        cnt = count_within(F, q, thr2, new)
         same = True
-        for i in range(p1.shape[0]):
+        for i in range(q.shape[1]):
             if new[i] != mask[i]:
                 same = False
                 break
@@ -1198,7 +1220,7 @@ def _finish(PT, p1, p2, T1, T2, F, threshold, min_inliers, d, den, w, use, buf, 
             break
         mask[:] = new
     if _FINAL_WSCALE > 0:
-        return refit_robust(PT, p1, p2, T1, T2, F, threshold, _REFINE_ROUNDS, d, den, w, use, buf, V, True)
+        return refit_robust(PT, q, T1, T2, F, threshold, _REFINE_ROUNDS, d, den, w, use, buf, V, True)
     return FM_OK
 
 
@@ -1212,12 +1234,12 @@ def _same(A, B):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy")
-def final_refinement(PT, p1, p2, T1, T2, starts, threshold, sel2, min_inliers, quick_rounds, full,
+def final_refinement(PT, q, T1, T2, starts, threshold, sel2, min_inliers, quick_rounds, full,
                      F):  # pragma: no cover - compiled
     """The multi-start final refinement: each start gets ``quick_rounds`` robust rounds, the ``full`` lowest of
     those (MSAC cost truncated at ``sel2``; ties in the order of ``starts``) get the whole refinement
     (:func:`_finish`), and the lowest cost wins into F. Returns False when every start failed."""
-    n = p1.shape[0]
+    n = q.shape[1]
     d = np.empty(n)
     den = np.empty(n)
     w = np.empty(n)
@@ -1231,9 +1253,9 @@ def final_refinement(PT, p1, p2, T1, T2, starts, threshold, sel2, min_inliers, q
     qcost = np.full(s, np.inf)
     for k in range(s):
         quick[k] = starts[k]
-        if refit_robust(PT, p1, p2, T1, T2, quick[k], threshold, quick_rounds, d, den, w, use, buf, V,
+        if refit_robust(PT, q, T1, T2, quick[k], threshold, quick_rounds, d, den, w, use, buf, V,
                         False) == FM_OK:
-            qcost[k] = msac_cost(quick[k], p1, p2, sel2, np.inf)
+            qcost[k] = msac_cost(quick[k], q, sel2, np.inf)
     order = np.argsort(qcost, kind="mergesort")
     cand = np.empty((3, 3))
     best = np.inf
@@ -1245,10 +1267,10 @@ def final_refinement(PT, p1, p2, T1, T2, starts, threshold, sel2, min_inliers, q
         if t > 0 and _same(quick[k], quick[order[t - 1]]):
             continue  # the same start as the previous one (a model that is both a so-far-best and in the pool)
         cand[:, :] = quick[k]
-        if _finish(PT, p1, p2, T1, T2, cand, threshold, min_inliers, d, den, w, use, buf, mask, new,
+        if _finish(PT, q, T1, T2, cand, threshold, min_inliers, d, den, w, use, buf, mask, new,
                    V) != FM_OK:
             continue
-        c = msac_cost(cand, p1, p2, sel2, np.inf)
+        c = msac_cost(cand, q, sel2, np.inf)
         if c < best:
             best = c
             F[:, :] = cand

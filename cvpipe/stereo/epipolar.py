@@ -144,8 +144,14 @@ _SOLVE_ERRORS = {
 
 
 def _products(x1n: np.ndarray, x2n: np.ndarray) -> np.ndarray:
-    """The (36, N) products of the 8-point system's monomials (:func:`cvpipe.stereo._kernels.design_products`)."""
-    return K.design_products(x1n, x2n, np.empty((36, len(x1n))))
+    """The (N, 36) products of the 8-point system's monomials (:func:`cvpipe.stereo._kernels.design_products`)."""
+    return K.design_products(x1n, x2n, np.empty((len(x1n), 36)))
+
+
+def _columns(p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
+    """(4, N) rows x1, y1, x2, y2 of the correspondences: the layout in which the kernels score them on SIMD
+    lanes."""
+    return np.ascontiguousarray(np.concatenate([p1.T, p2.T]))
 
 
 def _eight_point_normalized(x1n: np.ndarray, x2n: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
@@ -205,7 +211,7 @@ def sampson_least_squares(pts1, pts2, rounds: int = _REFINE_ROUNDS) -> np.ndarra
     check_int("rounds", rounds, 0)
     p1, p2, T1, T2, x1n, x2n = _check_pair(pts1, pts2, 8)
     F = np.empty((3, 3))
-    status = K.refit(_products(x1n, x2n), p1, p2, T1, T2, np.ones(len(p1), np.bool_), int(rounds),
+    status = K.refit(_products(x1n, x2n), _columns(p1, p2), T1, T2, np.ones(len(p1), np.bool_), int(rounds),
                      np.empty(len(p1)), F, np.empty((9, 9)), False)
     if status != K.FM_OK:
         raise EstimationError(_SOLVE_ERRORS[status])
@@ -344,6 +350,7 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
     check_int("min_inliers", min_inliers, 8)
     p1, p2, T1, T2, x1n, x2n = _check_pair(pts1, pts2, 8)
     PT = _products(x1n, x2n)
+    q = _columns(p1, p2)
     gen = np.random.default_rng(rng)
     n = len(p1)
     thr2 = float(threshold) ** 2
@@ -356,7 +363,7 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
         # 7 distinct indices per sample from 7 uniforms (exact sampling without replacement, in the kernel); the
         # models of the batch in pixel coordinates with their MSAC costs (those that cannot be among the lowest
         # _POOL_PER_BATCH are left unfinished at cost inf)
-        m, regular = K.ransac_batch(gen.random((_BATCH, 7)), x1n, x2n, p1, p2, T1, T2, thr2, _POOL_PER_BATCH,
+        m, regular = K.ransac_batch(gen.random((_BATCH, 7)), x1n, x2n, q, T1, T2, thr2, _POOL_PER_BATCH,
                                     models, costs)
         attempts += _BATCH
         iterations += regular
@@ -371,11 +378,11 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
             history.append(best_F)
             # local optimization: the least-squares model of the new best's inliers
             F_lo = np.empty((3, 3))
-            ok, c_lo = K.local_optimize(PT, p1, p2, T1, T2, best_F, thr2, F_lo)
+            ok, c_lo = K.local_optimize(PT, q, T1, T2, best_F, thr2, F_lo)
             if ok and c_lo < best_cost:
                 best_cost, best_F = c_lo, F_lo
                 history.append(best_F)
-            count = K.count_within(best_F, p1, p2, thr2, mask)
+            count = K.count_within(best_F, q, thr2, mask)
             if count > best_count:
                 best_count = count
                 w = count / n
@@ -399,7 +406,7 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
     starts = history[-_FINAL_STARTS:] + [f for _, f in sorted(pool, key=lambda t: t[0])[:_FINAL_STARTS]]
     # a cheap look at each start (two robust rounds), then the full refinement of the two most promising
     F = np.empty((3, 3))
-    if not K.final_refinement(PT, p1, p2, T1, T2, np.array(starts), float(threshold), sel2, int(min_inliers),
+    if not K.final_refinement(PT, q, T1, T2, np.array(starts), float(threshold), sel2, int(min_inliers),
                               2, 2, F):
         F = best_F
     d = sampson_distance(F, p1, p2)
