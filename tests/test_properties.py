@@ -133,6 +133,28 @@ def test_chance_probability_counts_exactly_the_pairs_within_the_threshold(n, thr
                               rel=1e-12, abs=0)
 
 
+@FAST
+@given(st.integers(2, 300), st.sampled_from([0.3, 1.0, 3.0, 25.0]), st.integers(0, 3), st.booleans(),
+       st.integers(0, 2 ** 31))
+def test_chance_bound_is_never_below_the_permutation_estimate(n, threshold, decimals, clustered, seed):
+    # the bound holds for any model: perspective ones that squeeze every source into the densest part of dst, and
+    # points on the grid's cell borders (coordinates rounded to multiples of the threshold) or stacked on one point
+    rng = np.random.default_rng(seed)
+    src = rng.uniform(-50, 250, (n, 2)).round(decimals)
+    dst = (rng.uniform(-50, 250, (n, 2)) / threshold).round(decimals) * threshold
+    if clustered:
+        dst[: n // 2] = dst[0] + rng.uniform(-threshold, threshold, (n // 2, 2))
+    H = np.eye(3) + rng.normal(0, 0.3, (3, 3)) * np.array([[1, 1, 100], [1, 1, 100], [1e-3, 1e-3, 0]])
+    # the worst model of all: every source onto one dst point (the densest disc then holds every hit)
+    onto = np.array([[0.0, 0.0, dst[0, 0]], [0.0, 0.0, dst[0, 1]], [0.0, 0.0, 1.0]])
+    for model in (H, onto):
+        for area in (None, 1e12):
+            bound = homography.chance_bound(dst, threshold, area)
+            assert 0.0 <= bound <= 1.0
+            assert bound >= homography.chance_probability(model, src, dst, threshold, area)
+            assert bound >= _pairs_within(src, dst, model, threshold) / (n * (n - 1.0))
+
+
 _MAGIC = [b"", b"\x89PNG\r\n\x1a\n", b"\xff\xd8\xff\xe0", b"BM", b"II*\x00", b"RIFF\x00\x00\x00\x00WEBP", b"P5\n"]
 
 

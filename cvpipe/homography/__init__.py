@@ -37,6 +37,7 @@ from .estimate import (
     METHODS,
     HomographyFit,
     chance_probability,
+    chance_bound,
     check_significant,
     estimate,
     estimate_item,
@@ -59,7 +60,7 @@ from .report import (
 
 __all__ = [
     "DEFAULT_MAX_ITERS", "MAX_NFA", "METHODS", "HomographyFit", "alignment_checkerboard", "alignment_panel",
-    "chance_probability", "check_significant", "compare_methods", "correspondences", "dlt", "estimate", "estimate_item",
+    "chance_bound", "chance_probability", "check_significant", "compare_methods", "correspondences", "dlt", "estimate", "estimate_item",
     "estimate_with",
     "find_homography", "hartley_normalization", "log10_nfa", "metric_key", "metrics_of", "picture_panels",
     "points_area", "quality_plots", "report_summary", "transform_points",

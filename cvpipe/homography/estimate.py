@@ -13,7 +13,8 @@ import numpy as np
 from ..errors import EstimationError, InputError, check_int
 from ..geometry import as_points
 from ..params import HomographyEstimateParams, section_or_default
-from ._kernels import _bounding_box, _chance_hits, _distinct_rows, _finalize, _normalize, _sq_errors
+from ._kernels import (_bounding_box, _chance_hits, _densest_cell, _distinct_rows, _finalize, _normalize, _rows_in_order,
+                       _sq_errors)
 from ._ransac_kernels import BOUND, ITERATIONS, _collapsed, _ransac_chunk, new_state
 from .dlt import _check_pair, _unit_h22
 
@@ -51,6 +52,7 @@ class HomographyFit:
         Root-mean-square reprojection error of the inliers under ``H``, in pixels of ``dst``.
     log10_nfa : float
         ``log10`` of the number of false alarms of the inlier count (see :func:`log10_nfa`); negative = significant.
+        Far from chance it is the upper bound that decided (from :func:`chance_bound`), not the exact value.
     """
 
     H: np.ndarray
@@ -131,8 +133,7 @@ def chance_probability(H: np.ndarray, src: np.ndarray, dst: np.ndarray, threshol
     s = np.ascontiguousarray(src, np.float64)
     d = np.ascontiguousarray(dst, np.float64)
     n = len(s)
-    a = points_area(d) if area is None else float(area)
-    p_uniform = min(1.0, math.pi * float(threshold) ** 2 / max(a, 1.0))
+    p_uniform = _uniform_chance(d, threshold, area)
     if n < 2:
         return p_uniform
     rows = np.arange(n, dtype=np.int64)
@@ -140,6 +141,27 @@ def chance_probability(H: np.ndarray, src: np.ndarray, dst: np.ndarray, threshol
         rows = np.linspace(0, n - 1, _CHANCE_ROWS).round().astype(np.int64)
     hits = _chance_hits(s, d, np.ascontiguousarray(H, np.float64), float(threshold) ** 2, rows)
     return max(p_uniform, hits / (len(rows) * (n - 1.0)))
+
+
+def _uniform_chance(dst: np.ndarray, threshold: float, area: float | None) -> float:
+    """The uniform null model of :func:`chance_probability`: ``pi threshold^2 / area``, at most 1."""
+    a = points_area(dst) if area is None else float(area)
+    return min(1.0, math.pi * float(threshold) ** 2 / max(a, 1.0))
+
+
+def chance_bound(dst: np.ndarray, threshold: float, area: float | None = None) -> float:
+    """An upper bound of :func:`chance_probability` that does not depend on the model, in O(N).
+
+    Under the permutation model a source point is an inlier of the pair ``(src_i, dst_j)`` when ``H src_i`` lies
+    within ``threshold`` of ``dst_j``; a disc of that radius meets at most 3 x 3 cells of a square grid of side
+    ``threshold`` (4 x 4 allowing for the rounding of the cell indices), so at most 16 times the count of the
+    densest cell of ``dst`` fall within it, whatever ``H`` is: ``p <= 16 max_cell / (N - 1)``.
+    """
+    d = np.ascontiguousarray(dst, np.float64)
+    p_uniform = _uniform_chance(d, threshold, area)
+    if len(d) < 2:
+        return p_uniform
+    return max(p_uniform, min(1.0, 16.0 * _densest_cell(d, float(threshold)) / (len(d) - 1.0)))
 
 
 def points_area(pts: np.ndarray) -> float:
@@ -174,6 +196,11 @@ def _nfa_test(fit: HomographyFit, src: np.ndarray, dst: np.ndarray, threshold: f
     n_src, k_src = _distinct_rows(src, inl)
     n_dst, k_dst = _distinct_rows(dst, inl)
     k, n = min(k_src, k_dst), min(n_src, n_dst)
+    # far from chance a bound of p that costs O(N) decides (the NFA grows with p); the O(rows x N) estimate of p
+    # only near the boundary
+    lnfa = log10_nfa(k, n, chance_bound(dst, threshold, area))
+    if lnfa < math.log10(MAX_NFA):
+        return HomographyFit(H=fit.H, inliers=fit.inliers, iterations=fit.iterations, rms=fit.rms, log10_nfa=lnfa)
     p = chance_probability(fit.H, src, dst, threshold, area)
     lnfa = log10_nfa(k, n, p)
     if not lnfa < math.log10(MAX_NFA):
@@ -316,7 +343,7 @@ def find_homography(
     attempts, max_attempts, chunk = 0, 10 * int(max_iters) + 100, 256
     # the SPRT assumes the points are verified in random order; the caller's order may be sorted by quality
     perm = gen.permutation(n)
-    sp, dp, snp, dnp = s[perm], d[perm], sn[perm], dn[perm]
+    sp, dp, snp, dnp = _rows_in_order(perm, s, d, sn, dn)
     while state[ITERATIONS] < state[BOUND] and attempts < max_attempts:
         k = int(min(chunk, max_attempts - attempts))
         u = gen.random((k, 4))
