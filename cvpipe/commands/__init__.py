@@ -116,11 +116,11 @@ def kernels_cached(*dispatchers) -> bool:
         func = d.py_func
         folder, module_file = os.path.split(os.path.abspath(func.__code__.co_filename))
         index = f"{os.path.splitext(module_file)[0]}.{func.__qualname__}-{func.__code__.co_firstlineno}.{tag}.nbi"
-        places = [os.path.join(folder, "__pycache__")]
+        # numba looks in one place: under NUMBA_CACHE_DIR when it is set, else in __pycache__
+        place = os.path.join(folder, "__pycache__")
         if cache_root:
-            sub = f"{os.path.basename(folder)}_{hashlib.sha1(folder.encode()).hexdigest()}"
-            places.insert(0, os.path.join(cache_root, sub))
-        if not any(os.path.exists(os.path.join(p, index)) for p in places):
+            place = os.path.join(cache_root, f"{os.path.basename(folder)}_{hashlib.sha1(folder.encode()).hexdigest()}")
+        if not os.path.exists(os.path.join(place, index)):
             return False
     return True
 
