@@ -233,11 +233,13 @@ def _lsq(src, dst, mask):
     # A^T A of the DLT rows [p, 0, -u p], [0, p, -v p] with p = (x, y, 1) has the block structure
     # [[S, 0, -Su], [0, S, -Sv], [-Su, -Sv, Suv]] with S = sum p p^T, Su = sum u p p^T, Sv = sum v p p^T,
     # Suv = sum (u^2 + v^2) p p^T: 24 sums per point instead of 162 products
-    S = np.zeros(6)
-    Su = np.zeros(6)
-    Sv = np.zeros(6)
-    Suv = np.zeros(6)
-    q = np.empty(6)
+    # the sums in local scalars, which the compiler keeps in registers (in arrays, each one went through memory on
+    # every point): S0..S5 = sum q, U0..U5 = sum u q, V0..V5 = sum v q, R0..R5 = sum (u^2 + v^2) q, for
+    # q = (x^2, xy, x, y^2, y, 1)
+    S0 = S1 = S2 = S3 = S4 = S5 = 0.0
+    U0 = U1 = U2 = U3 = U4 = U5 = 0.0
+    V0 = V1 = V2 = V3 = V4 = V5 = 0.0
+    R0 = R1 = R2 = R3 = R4 = R5 = 0.0
     for i in range(src.shape[0]):
         if not mask[i]:
             continue
@@ -245,18 +247,38 @@ def _lsq(src, dst, mask):
         y = (src[i, 1] - cy) * ss
         u = (dst[i, 0] - cX) * sd
         v = (dst[i, 1] - cY) * sd
-        q[0] = x * x
-        q[1] = x * y
-        q[2] = x
-        q[3] = y * y
-        q[4] = y
-        q[5] = 1.0
+        q0 = x * x
+        q1 = x * y
+        q3 = y * y
         r2 = u * u + v * v
-        for k in range(6):
-            S[k] += q[k]
-            Su[k] += u * q[k]
-            Sv[k] += v * q[k]
-            Suv[k] += r2 * q[k]
+        S0 += q0
+        S1 += q1
+        S2 += x
+        S3 += q3
+        S4 += y
+        S5 += 1.0
+        U0 += u * q0
+        U1 += u * q1
+        U2 += u * x
+        U3 += u * q3
+        U4 += u * y
+        U5 += u * 1.0
+        V0 += v * q0
+        V1 += v * q1
+        V2 += v * x
+        V3 += v * q3
+        V4 += v * y
+        V5 += v * 1.0
+        R0 += r2 * q0
+        R1 += r2 * q1
+        R2 += r2 * x
+        R3 += r2 * q3
+        R4 += r2 * y
+        R5 += r2 * 1.0
+    S = np.array([S0, S1, S2, S3, S4, S5])
+    Su = np.array([U0, U1, U2, U3, U4, U5])
+    Sv = np.array([V0, V1, V2, V3, V4, V5])
+    Suv = np.array([R0, R1, R2, R3, R4, R5])
     M = np.zeros((9, 9))
     for a in range(3):
         for b in range(3):

@@ -258,8 +258,8 @@ def find_homography(
     *,
     local_optimization: bool = True,
     refine: bool = True,
-    lo_multiplier: float = 3.0,
-    lo_steps: int = 4,
+    lo_multiplier: float = 2.0,
+    lo_steps: int = 2,
     area: float | None = None,
 ) -> HomographyFit:
     """Robust homography from putative correspondences (LO-RANSAC + Levenberg-Marquardt), like cv2.findHomography.
