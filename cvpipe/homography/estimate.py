@@ -29,7 +29,7 @@ _SPRT_DELTA0 = 0.01
 #: heavier tails: a smooth redescending weight over 3x the threshold (weight 0.79 at the threshold, 0.31 at twice
 #: it) gave lower corner errors on the Oxford/CMP pairs than hard inliers (see docs/notes/homography.md), like
 #: MAGSAC++'s marginalisation over the noise scale; the returned inlier mask still uses the threshold itself.
-_FINAL_ROUNDS = 3
+_FINAL_ROUNDS = 2
 _FINAL_WSCALE = 3.0
 #: a model is accepted only when its number of false alarms is below this (a-contrario, Moisan & Stival's ORSA: an
 #: NFA < 1 means fewer than one model this good is expected from matches that are pure chance)
