@@ -15,7 +15,7 @@ before it still ends the process with 130 and the one line. It then leaves with 
 (the standard streams flushed), so no SIGINT can arrive in a shutdown phase where Python has put back the default
 action, which would kill the process by the signal.
 
-:func:`results_out` marks that a command's results are going out: from then on an interrupt no longer cuts them
+:func:`results_out` marks that a command's results are going out: from then on an interrupt does not cut them
 short (only a second Ctrl-C does, at once) and no record follows them on stdout; the first one still ends the
 program with 130 and the line on stderr once they are out.
 

@@ -233,9 +233,8 @@ def _lsq(src, dst, mask):
     # A^T A of the DLT rows [p, 0, -u p], [0, p, -v p] with p = (x, y, 1) has the block structure
     # [[S, 0, -Su], [0, S, -Sv], [-Su, -Sv, Suv]] with S = sum p p^T, Su = sum u p p^T, Sv = sum v p p^T,
     # Suv = sum (u^2 + v^2) p p^T: 24 sums per point instead of 162 products
-    # the sums in local scalars, which the compiler keeps in registers (in arrays, each one went through memory on
-    # every point): S0..S5 = sum q, U0..U5 = sum u q, V0..V5 = sum v q, R0..R5 = sum (u^2 + v^2) q, for
-    # q = (x^2, xy, x, y^2, y, 1)
+    # the sums in local scalars, which the compiler keeps in registers: S0..S5 = sum q, U0..U5 = sum u q,
+    # V0..V5 = sum v q, R0..R5 = sum (u^2 + v^2) q, for q = (x^2, xy, x, y^2, y, 1)
     S0 = S1 = S2 = S3 = S4 = S5 = 0.0
     U0 = U1 = U2 = U3 = U4 = U5 = 0.0
     V0 = V1 = V2 = V3 = V4 = V5 = 0.0
