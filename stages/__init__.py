@@ -9,6 +9,7 @@ the highest one that every such machine has (AVX2 and FMA, x86-64-v3):
   inverses of the estimators differ in their last bits between them (measured: SkylakeX and Haswell kernels give
   different results on the same input);
 - ``OPENCV_CPU_DISABLE``: OpenCV's dispatched code stops at AVX2 (its SIFT output changes with the dispatched path);
+  only the levels above AVX2 that the CPU has are named (OpenCV warns about the others on every start);
 - ``OPENCV_IPP=AVX2``: the Intel IPP functions inside OpenCV (filters, resizing, warps) take their AVX2 code, not
   their AVX-512 code;
 - ``NPY_DISABLE_CPU_FEATURES``: numpy's AVX-512 loops are off (measured: ``np.argsort`` orders ties differently and
@@ -21,10 +22,32 @@ with ``NUMBA_CPU_NAME`` haswell, skylake-avx512 and the host: the same bytes); t
 
 import os
 
+#: OpenCV's dispatch levels above AVX2 and the /proc/cpuinfo flags each needs
+_OPENCV_ABOVE_AVX2 = {
+    "AVX512F": ("avx512f",),
+    "AVX512-SKX": ("avx512f", "avx512cd", "avx512bw", "avx512dq", "avx512vl"),
+    "AVX512-CLX": ("avx512f", "avx512cd", "avx512bw", "avx512dq", "avx512vl", "avx512_vnni"),
+    "AVX_VNNI": ("avx_vnni",),
+}
+
+
+def _opencv_disable() -> str:
+    """The levels of ``_OPENCV_ABOVE_AVX2`` that this CPU has: OpenCV prints a warning on every start for a level
+    it is asked to disable and the CPU lacks. Where /proc/cpuinfo cannot tell (not Linux), all of them."""
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as f:
+            flags = next((set(line.split(":", 1)[1].split()) for line in f if line.startswith("flags")), None)
+    except OSError:
+        flags = None
+    if flags is None:
+        return ",".join(_OPENCV_ABOVE_AVX2)
+    return ",".join(name for name, need in _OPENCV_ABOVE_AVX2.items() if flags.issuperset(need))
+
+
 #: environment variables set for every stage (see the module docstring)
 PINNED_ENV = {
     "OPENBLAS_CORETYPE": "Haswell",
-    "OPENCV_CPU_DISABLE": "AVX512F,AVX512-SKX,AVX512-CLX,AVX_VNNI",
+    "OPENCV_CPU_DISABLE": _opencv_disable(),
     "OPENCV_IPP": "AVX2",
     "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR AVX512F AVX512_SKX",
 }
