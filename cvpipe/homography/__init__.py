@@ -26,7 +26,8 @@ Modules: :mod:`~cvpipe.homography.estimate` (``find_homography``, ``estimate``, 
 ``homography.estimate`` section, the OpenCV methods, the test against
 chance), :mod:`~cvpipe.homography.dlt`, :mod:`~cvpipe.homography.match` (``correspondences``),
 :mod:`~cvpipe.homography.report` (pictures, metrics, summary), and the numba kernels in ``_kernels`` /
-``_ransac_kernels``.
+``_ransac_kernels``. The sampling, the state of the run, the bound, the SPRT, the driver and the NFA are the robust
+core's (:mod:`cvpipe.robust`): this package holds the homography's own parts (4-point solver, residual, refits).
 """
 
 from ..geometry import hartley_normalization

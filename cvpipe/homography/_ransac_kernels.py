@@ -1,13 +1,14 @@
-"""Numba kernels of the RANSAC loop: minimal samples, their closed-form solution, SPRT scoring, local optimization
-and the adaptive iteration bound. They only compute: :func:`cvpipe.homography.find_homography` validates."""
+"""Numba kernels of the homography recipe over the robust core (:mod:`cvpipe.robust`): the closed-form 4-point
+solution, its degeneracy tests, local optimization and the per-hypothesis loop. They only compute:
+:func:`cvpipe.homography.find_homography` validates."""
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 from numba import njit
 
+from ..robust.sampling import sample4
+from ..robust.stopping import on_new_best, on_rejected
 from ._kernels import _denormalize, _lsq, _score, _sq_errors
 
 #: smallest |twice the triangle area| of a sample triple in Hartley-normalized coordinates (mean radius sqrt(2))
@@ -17,42 +18,6 @@ _COLLINEAR_EPS = 1e-5
 #: cluster of many-to-one matches scores as exact "inliers" and wins the MSAC cost (seen with ORB on repetitive
 #: PCB texture: 24 source points matched to one scene point gave models at 3e-5 to 8e-5, and 1e-8)
 _MIN_CONDITION = 2e-4
-#: SPRT: time of one hypothesis (sample, checks, solve) in units of one point verification, and models per sample
-_SPRT_TM = 200.0
-_SPRT_MS = 1.0
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _sample4(u0, u1, u2, u3, n):
-    """Four distinct indices in [0, n) from four uniforms in [0, 1): exact sampling without replacement.
-
-    The k-th index is uniform over the n - k values not chosen yet: draw j in [0, n - k) and walk it past the
-    already chosen indices in increasing order (branch-light scalar code; this runs once per hypothesis).
-    """
-    a = min(int(u0 * n), n - 1)
-    b = min(int(u1 * (n - 1)), n - 2)
-    c = min(int(u2 * (n - 2)), n - 3)
-    d = min(int(u3 * (n - 3)), n - 4)
-    if b >= a:
-        b += 1
-    lo = min(a, b)
-    hi = max(a, b)
-    if c >= lo:
-        c += 1
-    if c >= hi:
-        c += 1
-    x0 = min(lo, c)
-    x2 = max(hi, c)
-    x1 = lo + hi + c - x0 - x2
-    if d >= x0:
-        d += 1
-    if d >= x1:
-        d += 1
-    if d >= x2:
-        d += 1
-    return a, b, c, d
-
-
 @njit(cache=True, inline="always", error_model="numpy")
 def _det3(ax, ay, bx, by, cx, cy):
     """det([a b c]) of homogeneous points (z = 1): twice the signed area of triangle abc."""
@@ -164,65 +129,6 @@ def _local_optimize(src, dst, H0, thr2, multiplier, steps, e2):
 
 
 @njit(cache=True, error_model="numpy")
-def _bound(inliers, n, log1mconf, max_iters, A):
-    """RANSAC iterations needed to draw and accept one all-inlier 4-sample with the given confidence.
-
-    An all-inlier sample is drawn with probability w^4 and survives the SPRT with probability about 1 - 1/A.
-    """
-    w = inliers / n
-    p = w * w * w * w * (1.0 - 1.0 / A)
-    if p >= 1.0:
-        return 1
-    if p <= 0.0:
-        return max_iters
-    den = math.log1p(-p)
-    if den >= 0.0:
-        return max_iters
-    k = log1mconf / den
-    if k >= max_iters:
-        return max_iters
-    return max(1, int(math.ceil(k)))
-
-
-@njit(cache=True, error_model="numpy")
-def _sprt_threshold(eps, delta, tm):
-    """Decision threshold A of Wald's SPRT for RANSAC (Chum & Matas 2008, eq. 2), A = K + log A by iteration."""
-    if not (0.0 < delta < eps < 1.0):
-        return np.inf
-    c = (1.0 - delta) * math.log((1.0 - delta) / (1.0 - eps)) + delta * math.log(delta / eps)
-    k = tm * c / _SPRT_MS + 1.0
-    a = k
-    for _ in range(20):
-        a = k + math.log(a)
-    return a
-
-
-#: The search state of the RANSAC loop: one float64 array that ``find_homography`` creates (:func:`new_state`) and
-#: ``_ransac_chunk`` updates in place, chunk after chunk. Its slots, by name:
-#:
-#: - ``BEST_COST``: MSAC cost of the best model so far; ``BEST_INLIERS``: its inlier count (after local optimization);
-#: - ``BOUND``: iterations the adaptive bound asks for; ``ITERATIONS``: non-degenerate hypotheses scored;
-#:   ``DEGENERATE``: samples rejected before scoring; ``LO_RUNS``: local optimizations run;
-#: - ``SPRT_EPS``, ``SPRT_DELTA``: the SPRT's inlier share of a good and of a bad model; ``SPRT_A``: its decision
-#:   threshold; ``SPRT_TM``: the time of one hypothesis in point verifications;
-#: - ``BAD_CONSISTENT``, ``BAD_SEEN``, ``BAD_MODELS``: consistent points and points verified in the models the SPRT
-#:   rejected, and how many (they re-estimate ``SPRT_DELTA``).
-(BEST_COST, BEST_INLIERS, BOUND, ITERATIONS, DEGENERATE, LO_RUNS, SPRT_EPS, SPRT_DELTA, SPRT_A, BAD_CONSISTENT,
- BAD_SEEN, BAD_MODELS, SPRT_TM) = range(13)
-
-
-def new_state(max_iters: int, eps: float, delta: float) -> np.ndarray:
-    """The search state before the first hypothesis (slots above): no model, the bound at ``max_iters``, the SPRT
-    designed for an inlier share ``eps`` of a good model and ``delta`` of a bad one."""
-    state = np.zeros(13)
-    state[BEST_COST] = np.inf
-    state[BOUND] = float(max_iters)
-    state[SPRT_EPS], state[SPRT_DELTA], state[SPRT_TM] = eps, delta, _SPRT_TM
-    state[SPRT_A] = _sprt_threshold(eps, delta, _SPRT_TM)
-    return state
-
-
-@njit(cache=True, error_model="numpy")
 def _collapsed(Hn):
     """True when the normalized model is nearly singular (see ``_MIN_CONDITION``)."""
     det = (Hn[0, 0] * (Hn[1, 1] * Hn[2, 2] - Hn[1, 2] * Hn[2, 1])
@@ -240,9 +146,10 @@ def _ransac_chunk(src, dst, sn, dn, Ts, Tdi, Tsi, Td, u, thr2, log1mconf, max_it
                   best_H, state):
     """Run hypotheses from the uniforms ``u`` (K, 4) until the adaptive bound is met or ``u`` runs out.
 
-    ``state`` (its slots: :func:`new_state`) is updated in place, as is ``best_H`` (pixel coordinates).
+    ``state`` (:func:`cvpipe.robust.new_state`) is updated in place, as is ``best_H`` (pixel coordinates).
     Returns the rows used.
     """
+    s = state[0]
     n = src.shape[0]
     Hn = np.empty((3, 3))
     tmp = np.empty((3, 3))
@@ -250,48 +157,29 @@ def _ransac_chunk(src, dst, sn, dn, Ts, Tdi, Tsi, Td, u, thr2, log1mconf, max_it
     e2 = np.empty(n)
     used = 0
     for k in range(u.shape[0]):
-        if state[ITERATIONS] >= state[BOUND]:
+        if s.iterations >= s.bound:
             break
         used += 1
-        i0, i1, i2, i3 = _sample4(u[k, 0], u[k, 1], u[k, 2], u[k, 3], n)
+        i0, i1, i2, i3 = sample4(u, k, n)
         if not _minimal_solve(sn, dn, i0, i1, i2, i3, Hn) or _collapsed(Hn):
-            state[DEGENERATE] += 1
+            s.degenerate += 1
             continue
-        state[ITERATIONS] += 1
+        s.iterations += 1
         _denormalize(Hn, Ts, Tdi, tmp, H)
-        cost, cnt, seen, status = _score(src, dst, H, thr2, state[BEST_COST], state[SPRT_A], state[SPRT_EPS],
-                                         state[SPRT_DELTA])
-        if status != 0 or cost >= state[BEST_COST]:
-            if status != 1:
-                continue
-            # rejected by the SPRT: its consistent fraction estimates delta; redesign the test when that drifts
-            state[BAD_CONSISTENT] += cnt
-            state[BAD_SEEN] += seen
-            state[BAD_MODELS] += 1
-            if state[BAD_MODELS] >= 20 and state[BAD_SEEN] > 0:
-                d = max(state[BAD_CONSISTENT] / state[BAD_SEEN], 1e-4)
-                if abs(d - state[SPRT_DELTA]) > 0.1 * state[SPRT_DELTA]:
-                    state[SPRT_DELTA] = min(d, 0.5 * state[SPRT_EPS])
-                    state[SPRT_A] = _sprt_threshold(state[SPRT_EPS], state[SPRT_DELTA], state[SPRT_TM])
-                    state[BOUND] = _bound(state[BEST_INLIERS], n, log1mconf, max_iters, state[SPRT_A])
+        cost, cnt, seen, status = _score(src, dst, H, thr2, s.best_cost, s.sprt_a, s.sprt_eps, s.sprt_delta)
+        if status != 0 or cost >= s.best_cost:
+            if status == 1:
+                on_rejected(s, cnt, seen, n, 4, log1mconf, max_iters)
             continue
         raw_cnt = cnt
         if lo and cnt >= 8:
             Hb, cost_b, cnt_b = _local_optimize(src, dst, H, thr2, lo_multiplier, lo_steps, e2)
-            state[LO_RUNS] += 1
+            s.lo_runs += 1
             _denormalize(Hb, Tsi, Td, tmp, Hn)
             if cost_b < cost and not _collapsed(Hn):
                 H[:, :] = Hb
                 cost = cost_b
                 cnt = cnt_b
-        state[BEST_COST] = cost
         best_H[:, :] = H
-        if raw_cnt / n > state[SPRT_EPS]:
-            # eps from the unoptimized model: a fresh all-inlier minimal model is less accurate than an LO'd one
-            state[SPRT_EPS] = raw_cnt / n
-            state[SPRT_DELTA] = min(state[SPRT_DELTA], 0.5 * state[SPRT_EPS])
-            state[SPRT_A] = _sprt_threshold(state[SPRT_EPS], state[SPRT_DELTA], state[SPRT_TM])
-        if cnt > state[BEST_INLIERS]:
-            state[BEST_INLIERS] = cnt
-        state[BOUND] = _bound(state[BEST_INLIERS], n, log1mconf, max_iters, state[SPRT_A])
+        on_new_best(s, cost, cnt, raw_cnt, n, 4, log1mconf, max_iters)
     return used

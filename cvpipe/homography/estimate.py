@@ -15,7 +15,8 @@ from ..geometry import as_points
 from ..params import HomographyEstimateParams, section_or_default
 from ._kernels import (_bounding_box, _chance_hits, _densest_cell, _distinct_rows, _finalize, _normalize, _rows_in_order,
                        _sq_errors)
-from ._ransac_kernels import BOUND, ITERATIONS, _collapsed, _ransac_chunk, new_state
+from ..robust import log10_nfa, new_state, run
+from ._ransac_kernels import _collapsed, _ransac_chunk
 from .dlt import _check_pair, _unit_h22
 
 #: the ``homography.estimate`` defaults: the one declaration of the keyword defaults of the estimators here
@@ -25,6 +26,8 @@ DEFAULT_MAX_ITERS = _EST.max_iters
 #: initial SPRT guesses: inlier ratio of a good model and consistent fraction of a bad one (both re-estimated)
 _SPRT_EPS0 = 0.05
 _SPRT_DELTA0 = 0.01
+#: the SPRT's time of one hypothesis (sample, checks, solve) in units of one point verification
+_SPRT_TM = 200.0
 #: final refinement: IRLS rounds and the cut-off of its Tukey weights (see ``_weights``) relative to the threshold. The threshold bounds the noise of an inlier, but real matches (SIFT under viewpoint change) have
 #: heavier tails: a smooth redescending weight over 3x the threshold (weight 0.79 at the threshold, 0.31 at twice
 #: it) gave lower corner errors on the Oxford/CMP pairs than hard inliers (see docs/notes/homography.md), like
@@ -68,51 +71,6 @@ class HomographyFit:
 
 
 # ------------------------------------------------------------------------------------ significance vs chance
-
-
-def log10_nfa(inliers: int, matches: int, p: float) -> float:
-    """``log10`` of the number of false alarms of a homography with ``inliers`` among ``matches``.
-
-    A model is fixed by 4 matches and there are ``C(n, 4)`` of them; under the null hypothesis each of the other
-    ``n - 4`` matches agrees with it by chance with probability ``p``, so (ORSA, Moisan & Stival 2004, with the
-    binomial tail instead of its bound) ``NFA = C(n, 4) P[Binomial(n - 4, p) >= k - 4]``.
-
-    Parameters
-    ----------
-    inliers, matches : int
-        Inlier count ``k`` and number of putative matches ``n``.
-    p : float
-        Chance that an unrelated match is an inlier (see :func:`chance_probability`).
-
-    Returns
-    -------
-    float
-        ``log10 NFA``; below ``log10(MAX_NFA) = 0`` the count is significant. ``inf`` for fewer than 4 of either.
-
-    Examples
-    --------
-    >>> from cvpipe.homography import log10_nfa
-    >>> log10_nfa(40, 100, 0.01) < 0 < log10_nfa(6, 100, 0.01)  # 40 of 100 agree: no chance; 6: chance
-    True
-    """
-    from scipy.special import bdtrc, gammaln
-
-    n, k = int(matches), int(inliers)
-    if n < 4 or k < 4:
-        return float("inf")
-    p = min(max(float(p), 0.0), 1.0)
-    log_models = (gammaln(n + 1) - gammaln(5) - gammaln(n - 3)) / math.log(10)
-    if k == 4 or p >= 1.0:
-        return float(log_models)
-    j = k - 4
-    if p <= 0.0:
-        return float("-inf")
-    tail = float(bdtrc(j - 1, n - 4, p))  # P[X > j - 1] = P[X >= j]
-    if tail <= 0.0:  # underflow: the first term of the tail bounds it from below and stays finite in logs
-        tail_log = (gammaln(n - 3) - gammaln(j + 1) - gammaln(n - 3 - j) + j * math.log(p)
-                    + (n - 4 - j) * math.log1p(-p)) / math.log(10)
-        return float(log_models + tail_log)
-    return float(log_models + math.log10(tail))
 
 
 #: at most this many source points enter the permutation estimate of :func:`chance_probability` (O(rows x N))
@@ -337,24 +295,22 @@ def find_homography(
     Tdi = np.linalg.inv(Td)
     Tsi = np.linalg.inv(Ts)
     best_H = np.zeros((3, 3))
-    state = new_state(int(max_iters), _SPRT_EPS0, _SPRT_DELTA0)
+    state = new_state(int(max_iters), _SPRT_EPS0, _SPRT_DELTA0, _SPRT_TM)
     log1mconf = math.log1p(-float(confidence))
-    # degenerate samples are not counted as iterations; cap the attempts so an all-degenerate set terminates
-    attempts, max_attempts, chunk = 0, 10 * int(max_iters) + 100, 256
     # the SPRT assumes the points are verified in random order; the caller's order may be sorted by quality
     perm = gen.permutation(n)
     sp, dp, snp, dnp = _rows_in_order(perm, s, d, sn, dn)
-    while state[ITERATIONS] < state[BOUND] and attempts < max_attempts:
-        k = int(min(chunk, max_attempts - attempts))
-        u = gen.random((k, 4))
-        attempts += _ransac_chunk(sp, dp, snp, dnp, Ts, Tdi, Tsi, Td, u, thr2, log1mconf, int(max_iters),
-                                  bool(local_optimization), float(lo_multiplier), int(lo_steps), best_H, state)
-        chunk = min(chunk * 2, 8192)
-    iterations = int(state[ITERATIONS])
+
+    def step(u):
+        return _ransac_chunk(sp, dp, snp, dnp, Ts, Tdi, Tsi, Td, u, thr2, log1mconf, int(max_iters),
+                             bool(local_optimization), float(lo_multiplier), int(lo_steps), best_H, state)
+
+    run(step, gen, 4, state, max_iters=int(max_iters), first_chunk=256, largest_chunk=8192)
+    iterations = int(state["iterations"][0])
     if iterations == 0:
         raise EstimationError(
-            f"all {attempts} sampled 4-point sets were degenerate (collinear or orientation-flipping); "
-            "the correspondences are nearly collinear or inconsistent"
+            f"all {int(state['attempts'][0])} sampled 4-point sets were degenerate (collinear or "
+            "orientation-flipping); the correspondences are nearly collinear or inconsistent"
         )
     H, mask, e2 = _finalize(s, d, best_H, thr2, bool(refine), _FINAL_ROUNDS, thr2 * _FINAL_WSCALE ** 2)
     if refine and _collapsed(Td @ H @ Tsi):  # the refinement drifted to a degenerate model: keep RANSAC's

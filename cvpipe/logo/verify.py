@@ -8,14 +8,13 @@ from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
-from scipy.special import gammaln
-from scipy.stats import binom
 
 from ..errors import EstimationError
 from ..features import Features
 from ..geometry import apply_homography as _map_points
 from ..homography import find_homography
 from ..params import LogoVerifyParams
+from ..robust import draw_samples, log10_nfa
 
 #: the ``logo.verify`` defaults: the one declaration of :func:`affine_ransac`'s ``hypotheses``
 _VERIFY = LogoVerifyParams()
@@ -224,9 +223,8 @@ def affine_ransac(src: np.ndarray, dst: np.ndarray, threshold: float, hypotheses
     rng = np.random.default_rng(rng)
     if n * (n - 1) * (n - 2) // 6 <= hypotheses:
         idx = np.array(list(itertools.combinations(range(n), 3)), np.int64)
-    else:
-        idx = rng.integers(0, n, (hypotheses, 3))
-        idx = idx[(idx[:, 0] != idx[:, 1]) & (idx[:, 0] != idx[:, 2]) & (idx[:, 1] != idx[:, 2])]
+    else:  # the robust core's sampler: distinct triples, uniform, reproducible from the seed
+        idx = draw_samples(rng.random((hypotheses, 3)), n)
     # the linear part L of each sample maps the edge vectors of the source triangle onto the target's: L = E D^-1
     d1, d2 = src[idx[:, 1]] - src[idx[:, 0]], src[idx[:, 2]] - src[idx[:, 0]]
     e1, e2 = dst[idx[:, 1]] - dst[idx[:, 0]], dst[idx[:, 2]] - dst[idx[:, 0]]
@@ -298,13 +296,8 @@ def significance(inliers: int, matches: int, threshold: float, area: float, n_re
     if matches < 5 or inliers < (5 if pose_prob >= 1.0 else 4):
         return -np.inf
     prob = min(1.0, np.pi * threshold ** 2 / max(area, 1.0)) * pose_prob
-    n, k = matches - 4, inliers - 4
-    log_tail = binom.logsf(k - 1, n, prob) if k > 0 else 0.0  # ln P(X >= k)
-    if not np.isfinite(log_tail):  # the tail underflows for huge inlier counts; its first term bounds it from below
-        log_tail = binom.logpmf(k, n, prob)
-    log_tail /= np.log(10)
-    log_hyp = (gammaln(matches + 1) - gammaln(5) - gammaln(matches - 3)) / np.log(10)  # log10 C(matches, 4)
-    return float(-(log_tail + 4 * np.log10(pose_prob) + log_hyp + np.log10(max(n_refs, 1))))
+    # NFA of the model (robust core) times the references tried; the 4 sample matches agree in pose by chance too
+    return float(-(log10_nfa(inliers, matches, prob) + 4 * np.log10(pose_prob) + np.log10(max(n_refs, 1))))
 
 
 def _check(brand: str, r: int, ref: Reference, H: np.ndarray, inl: np.ndarray, src: np.ndarray, dst: np.ndarray,

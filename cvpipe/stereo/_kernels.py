@@ -11,6 +11,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..homography._kernels import _SYM6, _jacobi_eigh  # the symmetric 9x9 eigen-solver, shared with the homography
+from ..robust.sampling import sample_distinct
 
 #: "infinite" path cost in the int16 path buffers; real path costs stay <= 255 + P2 <= 4351 (checked in disparity_sgm),
 #: so _BIG + P1 cannot overflow int16 and _BIG never wins a minimum
@@ -760,23 +761,6 @@ def eight_point_solve(PT, w2, count, Fn, V, warm):  # pragma: no cover - compile
 
 
 @njit(cache=True, error_model="numpy")
-def _sample7(u, n, pick, chosen):  # pragma: no cover - compiled
-    """Seven distinct indices in [0, n) into ``pick`` from seven uniforms in [0, 1): exact sampling without
-    replacement (the j-th index is uniform over the n - j values not chosen yet: draw in [0, n - j) and walk it past
-    the chosen indices, kept sorted in ``chosen``)."""
-    for j in range(7):
-        r = min(int(u[j] * (n - j)), n - j - 1)
-        t = 0
-        while t < j and r >= chosen[t]:
-            r += 1
-            t += 1
-        for s in range(j, t, -1):
-            chosen[s] = chosen[s - 1]
-        chosen[t] = r
-        pick[j] = r
-
-
-@njit(cache=True, error_model="numpy")
 def _null2(A, F1, F2, perm):  # pragma: no cover - compiled
     """An orthonormal basis (F1, F2) of the null space of the 7x9 system A (overwritten), by Gauss-Jordan
     elimination with full pivoting; False when A has rank below 7 (7th pivot below ``_RANK_EPS`` of the 1st).
@@ -1018,7 +1002,7 @@ def ransac_batch(u, x1n, x2n, q, T1, T2, thr2, keep, models, costs):  # pragma: 
     m = 0
     regular = 0
     for k in range(u.shape[0]):
-        _sample7(u[k], n, pick, chosen)
+        sample_distinct(u, k, n, pick, chosen)
         nr = seven_point(x1n, x2n, pick, Fns, A, F1, F2, D, roots, perm)
         if nr == 0:
             continue

@@ -7,7 +7,8 @@ pair to the epipolar variety, in pixels) is at most ``threshold``. The pipeline 
 
 1. Hartley normalization of both point sets (as ``cvpipe.geometry.hartley_normalization``, in one pass with the
    test that they are not all on one line);
-2. RANSAC over minimal 7-point samples, solved in batches: the 2-D null space of the 7x9 epipolar system, then the
+2. RANSAC (the robust core :mod:`cvpipe.robust`: its sampler, bound and driver) over minimal 7-point samples,
+   solved in batches: the 2-D null space of the 7x9 epipolar system, then the
    one to three real roots of the cubic ``det(a F1 + (1 - a) F2) = 0``; samples whose system has rank below 7
    (repeated or collinear points) are skipped. Hypotheses are scored by MSAC (truncated squared Sampson distance)
    and the number of samples follows the adaptive bound ``log(1 - confidence) / log(1 - w^7)``, with at least
@@ -39,6 +40,7 @@ import numpy as np
 from ..errors import EstimationError, InputError, check_int
 from ..geometry import as_points, hartley_normalization
 from ..params import StereoRectifyParams
+from ..robust import iterations_needed, new_state, run
 from . import _kernels as K
 from ._kernels import _FINAL_WSCALE, _MAD_TO_SIGMA, _MIN_C, _RANK_EPS, _REFINE_ROUNDS, _TUKEY_C  # noqa: F401
 
@@ -356,42 +358,44 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
     thr2 = float(threshold) ** 2
     log1mconf = math.log1p(-float(confidence))
 
-    best_F, best_cost, best_count, history, pool = None, np.inf, 0, [], []
-    bound, iterations, attempts = float(max_iters), 0, 0
+    state = new_state(int(max_iters))
+    best = {"F": None, "history": [], "pool": []}
     models, costs, mask = np.empty((3 * _BATCH, 3, 3)), np.empty(3 * _BATCH), np.empty(n, np.bool_)
-    while (iterations < bound or iterations < min(_MIN_SAMPLES, max_iters)) and attempts < 10 * max_iters + 100:
-        # 7 distinct indices per sample from 7 uniforms (exact sampling without replacement, in the kernel); the
-        # models of the batch in pixel coordinates with their MSAC costs (those that cannot be among the lowest
+
+    def step(u):
+        # the models of the batch in pixel coordinates with their MSAC costs (those that cannot be among the lowest
         # _POOL_PER_BATCH are left unfinished at cost inf)
-        m, regular = K.ransac_batch(gen.random((_BATCH, 7)), x1n, x2n, q, T1, T2, thr2, _POOL_PER_BATCH,
-                                    models, costs)
-        attempts += _BATCH
-        iterations += regular
+        m, regular = K.ransac_batch(u, x1n, x2n, q, T1, T2, thr2, _POOL_PER_BATCH, models, costs)
+        s = state[0]
+        s["iterations"] += regular
         if m == 0:
-            continue
+            return len(u)
         cost = costs[:m]
         for i in np.argsort(cost)[:_POOL_PER_BATCH]:
-            pool.append((float(cost[i]), models[i].copy()))
+            best["pool"].append((float(cost[i]), models[i].copy()))
         j = int(np.argmin(cost))
-        if cost[j] < best_cost:
-            best_cost, best_F = float(cost[j]), models[j].copy()
-            history.append(best_F)
+        if cost[j] < s["best_cost"]:
+            s["best_cost"], best["F"] = float(cost[j]), models[j].copy()
+            best["history"].append(best["F"])
             # local optimization: the least-squares model of the new best's inliers
             F_lo = np.empty((3, 3))
-            ok, c_lo = K.local_optimize(PT, q, T1, T2, best_F, thr2, F_lo)
-            if ok and c_lo < best_cost:
-                best_cost, best_F = c_lo, F_lo
-                history.append(best_F)
-            count = K.count_within(best_F, q, thr2, mask)
-            if count > best_count:
-                best_count = count
-                w = count / n
-                denom = math.log1p(-min(w ** 7, 1 - 1e-16))
-                bound = min(float(max_iters), log1mconf / denom if denom < 0 else float(max_iters))
+            ok, c_lo = K.local_optimize(PT, q, T1, T2, best["F"], thr2, F_lo)
+            if ok and c_lo < s["best_cost"]:
+                s["best_cost"], best["F"] = c_lo, F_lo
+                best["history"].append(best["F"])
+            count = K.count_within(best["F"], q, thr2, mask)
+            if count > s["best_inliers"]:
+                s["best_inliers"] = count
+                s["bound"] = iterations_needed(count, n, 7, log1mconf, int(max_iters), np.inf)
+        return len(u)
+
+    run(step, gen, 7, state, max_iters=int(max_iters), first_chunk=_BATCH, largest_chunk=_BATCH,
+        min_iterations=min(_MIN_SAMPLES, int(max_iters)))
+    best_F, history, pool, iterations = best["F"], best["history"], best["pool"], int(state["iterations"][0])
     if best_F is None:
         if check_planar and _homography_share(p1, p2, threshold, gen) >= _PLANAR_SHARE:
             raise EstimationError(_PLANAR_MESSAGE)
-        raise EstimationError(f"all {attempts} sampled 7-point sets were degenerate; the correspondences are "
+        raise EstimationError(f"all {int(state['attempts'][0])} sampled 7-point sets were degenerate; the correspondences are "
                               "nearly collinear or repeated")
     d_best = sampson_distance(best_F, p1, p2)
     mask = d_best <= threshold
