@@ -81,6 +81,16 @@ def _images(folder: Path) -> list[Path]:
     return sorted(p for p in folder.glob("*") if p.suffix.lower() in (".png", ".jpg", ".jpeg"))
 
 
+def _hough_pair(edges, rho: float, theta: float, threshold: int) -> dict:
+    """The two calls that the hough row compares: ours (no refinement, as OpenCV) and ``cv2.HoughLines``."""
+    import cv2
+
+    from ..hough import hough_lines
+
+    return {"ours": lambda: hough_lines(edges, rho, theta, threshold, refine=False),
+            "opencv": lambda: cv2.HoughLines(edges, rho, theta, threshold)}
+
+
 def row_hough(ctx: dict) -> list[Row]:
     """``hough_lines`` / ``cv2.HoughLines`` per edge map (the pipeline's Canny and line parameters): worst and
     median ratio; accuracy: images whose lines equal OpenCV's exactly."""
@@ -95,7 +105,7 @@ def row_hough(ctx: dict) -> list[Row]:
     paths = _images(ctx["samples"] / "hough")
     if ctx["data"] is not None and (ctx["data"] / "yorkurban_lines" / "images").is_dir():
         paths += _images(ctx["data"] / "yorkurban_lines" / "images")
-    ratios, same = [], 0
+    ratios, same, timed = [], 0, []
     for path in ctx["progress"](paths, "guard hough"):
         edges = canny_edges(cv2.imread(str(path), cv2.IMREAD_GRAYSCALE), e.canny_low, e.canny_high,
                             aperture=e.aperture, l2_gradient=e.l2_gradient, blur_sigma=e.blur_sigma)
@@ -105,9 +115,14 @@ def row_hough(ctx: dict) -> list[Row]:
         same += bool(len(ours) == len(cv) and np.array_equal(ours[:, :2].astype(np.float32), cv))
         # a few milliseconds a call, and the worst of 106 ratios is kept: more calls per side keep that maximum from
         # being one unlucky call on a loaded machine (best of 3 gave 0.90x-0.95x worst at load 0.7-1.7)
-        t = best_of({"ours": lambda: hough_lines(edges, p.rho, theta, p.threshold, refine=False),
-                     "opencv": lambda: cv2.HoughLines(edges, p.rho, theta, p.threshold)}, ctx["repeats"] + 4)
+        t = best_of(_hough_pair(edges, p.rho, theta, p.threshold), ctx["repeats"] + 4)
         ratios.append(t["ours"] / t["opencv"])
+        timed.append(edges)
+    # the worst of 106 best-of-7 ratios is mostly the unluckiest image (one descheduled call): the five worst are
+    # measured again with 31 calls per side, and that estimate of their ratio is kept
+    for i in sorted(range(len(ratios)), key=ratios.__getitem__)[-5:]:
+        t = best_of(_hough_pair(timed[i], p.rho, theta, p.threshold), 31)
+        ratios[i] = t["ours"] / t["opencv"]
     acc = f"same lines as OpenCV on {same}/{len(paths)} images"
     return [Row("hough_max", max(ratios), "x", "hough_lines / cv2.HoughLines, worst image", acc, len(paths)),
             Row("hough_median", statistics.median(ratios), "x", "hough_lines / cv2.HoughLines, median image", acc,

@@ -180,10 +180,11 @@ def _grid(h: int, w: int, rho: float, theta: float, min_theta: float, max_theta:
 # ------------------------------------------------------------------------------------------------- standard
 
 
-#: fewer votes than this (edge pixels x angles) are cast on one thread: on 2 cores the parallel vote of a 640x480
-#: photo (2-8M votes, 2-9 ms) was as often slower as faster than one thread (numba's workqueue threads start and
-#: wait at a barrier per call), so it is kept for edge maps about twice the largest of York Urban and beyond
-_PARALLEL_MIN_VOTES = 16_000_000
+#: fewer votes than this (edge pixels x angles) are cast on one thread. On 2 cores (numba's workqueue layer, idle
+#: machine, best of 31 calls) the parallel vote of a York Urban photo took 0.52-0.60x cv2.HoughLines' time (OpenCV
+#: 5.1) from 2M votes up, one thread 0.75-0.85x; below about 1.5M votes (the samples' drawings, 0.5M) starting the
+#: threads costs more than the second core saves
+_PARALLEL_MIN_VOTES = 2_000_000
 
 
 def _use_parallel(parallel: bool | None, votes: int | None = None) -> bool:
