@@ -112,7 +112,7 @@ REPORTED: dict[str, Reported] = {
 }
 
 #: keys that describe the run rather than the result: shown in the machine line, not in the tables
-MACHINE_KEYS = ("cpus", "cpu_count", "cpu_model", "load_average", "load_average_1min", "command")
+MACHINE_KEYS = ("cpus", "cpu_count", "cpu_model", "load_average", "load_average_1min", "command", "versions")
 #: a record's label column: the first of these fields it has
 LABELS = ("row", "set", "pair", "mode", "method", "image", "name")
 
@@ -244,6 +244,9 @@ def _machine(data: Any, machine: str | None) -> str:
         where = "load average (1, 5, 15 min) " + " / ".join(fmt(v) for v in load)
     else:
         where = f"1-min load average {fmt(load)}"
+    versions = find("versions")
+    if isinstance(versions, dict) and versions:
+        where += "; " + ", ".join(f"{k} {v}" for k, v in sorted(versions.items()))
     return f"Machine: {', '.join(parts)}; {where}."
 
 
