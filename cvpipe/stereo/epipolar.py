@@ -395,8 +395,8 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
     if best_F is None:
         if check_planar and _homography_share(p1, p2, threshold, gen) >= _PLANAR_SHARE:
             raise EstimationError(_PLANAR_MESSAGE)
-        raise EstimationError(f"all {int(state['attempts'][0])} sampled 7-point sets were degenerate; the correspondences are "
-                              "nearly collinear or repeated")
+        raise EstimationError(f"all {int(state['attempts'][0])} sampled 7-point sets were degenerate; the "
+                              "correspondences are nearly collinear or repeated")
     d_best = sampson_distance(best_F, p1, p2)
     mask = d_best <= threshold
     if mask.sum() < min_inliers:
