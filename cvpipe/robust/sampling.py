@@ -2,9 +2,9 @@
 
 The j-th index of a sample is uniform over the ``n - j`` values not chosen yet: it is drawn in [0, n - j) from the
 j-th uniform and walked past the indices already chosen, in increasing order. :func:`sample_distinct` does this for
-any sample size; :func:`sample4` is the same draw for 4 indices in scalar, branch-light code (the homography's
-sample: its loop runs tens of thousands of hypotheses, and the general loop over arrays measured 25 % slower on
-the whole 90 %-outlier run); both give the same indices from the same uniforms.
+any sample size; :func:`sample4` is the same draw for 4 indices in scalar, branch-light code, for the homography's
+loop of tens of thousands of hypotheses (figures: docs/notes/robust.md); both give the same indices from the same
+uniforms.
 """
 
 from __future__ import annotations
