@@ -80,7 +80,8 @@ def stage_imports(tree: ast.AST) -> set[str]:
 
 
 def test_the_stage_detector_sees_absolute_and_relative_imports():
-    code = "from stages._runner import run\nfrom stages.logo_match import x\nfrom . import hough_edges\nimport stages.y\n"
+    code = ("from stages._runner import run\nfrom stages.logo_match import x\nfrom . import hough_edges\n"
+            "import stages.y\n")
     assert stage_imports(ast.parse(code)) == {"stages.logo_match", "stages.hough_edges", "stages.y"}
 
 
