@@ -8,9 +8,9 @@ pair to the epipolar variety, in pixels) is at most ``threshold``. The pipeline 
 1. Hartley normalization of both point sets (as ``cvpipe.geometry.hartley_normalization``, in one pass with the
    test that they are not all on one line);
 2. RANSAC (the robust core :mod:`cvpipe.robust`: its sampler, bound and driver) over minimal 7-point samples,
-   solved in batches: the 2-D null space of the 7x9 epipolar system, then the
-   one to three real roots of the cubic ``det(a F1 + (1 - a) F2) = 0``; samples whose system has rank below 7
-   (repeated or collinear points) are skipped. Hypotheses are scored by MSAC (truncated squared Sampson distance)
+   solved in batches: the 2-D null space of the 7x9 epipolar system, then the one to three real roots of the cubic
+   ``det(a F1 + (1 - a) F2) = 0``; samples whose system has rank below 7 (repeated or collinear points) are
+   skipped. Hypotheses are scored by MSAC (truncated squared Sampson distance)
    and the number of samples follows the adaptive bound ``log(1 - confidence) / log(1 - w^7)``, with at least
    ``_MIN_SAMPLES``;
 3. every so-far-best model is refitted by the normalized 8-point algorithm on its inliers (local optimization);
@@ -359,10 +359,11 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
     log1mconf = math.log1p(-float(confidence))
 
     state = new_state(int(max_iters))
-    best = {"F": None, "history": [], "pool": []}
+    best_F, history, pool = None, [], []
     models, costs, mask = np.empty((3 * _BATCH, 3, 3)), np.empty(3 * _BATCH), np.empty(n, np.bool_)
 
     def step(u):
+        nonlocal best_F
         # the models of the batch in pixel coordinates with their MSAC costs (those that cannot be among the lowest
         # _POOL_PER_BATCH are left unfinished at cost inf)
         m, regular = K.ransac_batch(u, x1n, x2n, q, T1, T2, thr2, _POOL_PER_BATCH, models, costs)
@@ -372,18 +373,18 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
             return len(u)
         cost = costs[:m]
         for i in np.argsort(cost)[:_POOL_PER_BATCH]:
-            best["pool"].append((float(cost[i]), models[i].copy()))
+            pool.append((float(cost[i]), models[i].copy()))
         j = int(np.argmin(cost))
         if cost[j] < s["best_cost"]:
-            s["best_cost"], best["F"] = float(cost[j]), models[j].copy()
-            best["history"].append(best["F"])
+            s["best_cost"], best_F = float(cost[j]), models[j].copy()
+            history.append(best_F)
             # local optimization: the least-squares model of the new best's inliers
             F_lo = np.empty((3, 3))
-            ok, c_lo = K.local_optimize(PT, q, T1, T2, best["F"], thr2, F_lo)
+            ok, c_lo = K.local_optimize(PT, q, T1, T2, best_F, thr2, F_lo)
             if ok and c_lo < s["best_cost"]:
-                s["best_cost"], best["F"] = c_lo, F_lo
-                best["history"].append(best["F"])
-            count = K.count_within(best["F"], q, thr2, mask)
+                s["best_cost"], best_F = c_lo, F_lo
+                history.append(best_F)
+            count = K.count_within(best_F, q, thr2, mask)
             if count > s["best_inliers"]:
                 s["best_inliers"] = count
                 s["bound"] = iterations_needed(count, n, 7, log1mconf, int(max_iters), np.inf)
@@ -391,7 +392,7 @@ def find_fundamental(pts1, pts2, threshold: float = _RECTIFY.threshold, confiden
 
     run(step, gen, 7, state, max_iters=int(max_iters), first_chunk=_BATCH, largest_chunk=_BATCH,
         min_iterations=min(_MIN_SAMPLES, int(max_iters)))
-    best_F, history, pool, iterations = best["F"], best["history"], best["pool"], int(state["iterations"][0])
+    iterations = int(state["iterations"][0])
     if best_F is None:
         if check_planar and _homography_share(p1, p2, threshold, gen) >= _PLANAR_SHARE:
             raise EstimationError(_PLANAR_MESSAGE)
