@@ -160,11 +160,11 @@ def _ransac_chunk(src, dst, sn, dn, Ts, Tdi, Tsi, Td, u, thr2, log1mconf, max_it
         if s.iterations >= s.bound:
             break
         used += 1
+        s.iterations += 1
         i0, i1, i2, i3 = sample4(u, k, n)
         if not _minimal_solve(sn, dn, i0, i1, i2, i3, Hn) or _collapsed(Hn):
             s.degenerate += 1
             continue
-        s.iterations += 1
         _denormalize(Hn, Ts, Tdi, tmp, H)
         cost, cnt, seen, status = _score(src, dst, H, thr2, s.best_cost, s.sprt_a, s.sprt_eps, s.sprt_delta)
         if status != 0 or cost >= s.best_cost:

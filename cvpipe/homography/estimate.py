@@ -50,7 +50,8 @@ class HomographyFit:
     inliers : (N,) bool
         Correspondences whose reprojection error under ``H`` is at most ``threshold`` pixels.
     iterations : int
-        RANSAC hypotheses drawn (degenerate samples that were rejected before solving are not counted).
+        Samples drawn, degenerate ones included (what the adaptive bound counts; ``cv2.findHomography`` counts the
+        same way).
     rms : float
         Root-mean-square reprojection error of the inliers under ``H``, in pixels of ``dst``.
     log10_nfa : float
@@ -231,7 +232,7 @@ def find_homography(
     confidence : float
         Probability in (0, 1) that at least one all-inlier sample was drawn when the adaptive bound stops RANSAC.
     max_iters : int
-        Upper bound on the number of hypotheses.
+        Upper bound on the number of samples drawn (degenerate ones included).
     rng : None, int or numpy.random.Generator
         Seed or generator for the sampling (``np.random.default_rng(rng)``).
     local_optimization : bool
@@ -307,7 +308,7 @@ def find_homography(
 
     run(step, gen, 4, state, max_iters=int(max_iters), first_chunk=256, largest_chunk=8192)
     iterations = int(state["iterations"][0])
-    if iterations == 0:
+    if iterations == int(state["degenerate"][0]):
         raise EstimationError(
             f"all {int(state['attempts'][0])} sampled 4-point sets were degenerate (collinear or "
             "orientation-flipping); the correspondences are nearly collinear or inconsistent"

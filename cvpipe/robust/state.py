@@ -12,7 +12,8 @@ from .stopping import sprt_threshold
 #:
 #: - ``best_cost``: the score of the best model so far (MSAC cost: lower is better); ``best_inliers``: its inlier
 #:   count (after local optimization);
-#: - ``bound``: the iterations the adaptive bound asks for; ``iterations``: regular hypotheses scored;
+#: - ``bound``: the iterations the adaptive bound asks for; ``iterations``: what the recipe counts against it
+#:   (the homography: samples drawn, degenerate ones included; the fundamental matrix: regular samples);
 #:   ``attempts``: samples drawn, degenerate ones included; ``degenerate``: samples rejected before scoring;
 #:   ``lo_runs``: local optimizations run;
 #: - ``sprt_eps``, ``sprt_delta``: the SPRT's inlier share of a good and of a bad model; ``sprt_a``: its decision
