@@ -3,11 +3,58 @@
 The test session runs this once before its first test (``tests/conftest.py``): a command run on a cold numba cache
 says "compiling the <task> kernels once" on stderr, and the tests that read stderr line by line would see that note
 or not depending on which test happened to run first. The tests of the note itself use a cache folder of their own.
+
+numba keys a cached kernel on its own file: a kernel that calls a kernel of another file keeps the callee's old
+machine code after the callee's file changes. So the cached kernels of the package are dropped first whenever any of
+its modules that use numba changed since they were compiled (a digest of the sources is kept beside them).
 """
 
 from __future__ import annotations
 
+import hashlib
+from pathlib import Path
+
 import numpy as np
+
+PACKAGE = Path(__file__).resolve().parents[1] / "cvpipe"
+
+
+def sources_digest() -> str:
+    """sha1 of the package's modules that use numba, paths and contents, in a fixed order (an edit elsewhere cannot
+    change a compiled kernel)."""
+    h = hashlib.sha1()
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if b"numba" not in path.read_bytes():
+            continue
+        h.update(str(path.relative_to(PACKAGE)).encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def drop_stale_kernels(digest: str) -> int:
+    """Delete the package's cached kernels unless they were compiled from sources with ``digest``; the files
+    deleted."""
+    from cvpipe.commands import kernel_cache_folder
+
+    folders = sorted({str(p.parent) for p in PACKAGE.rglob("*.py")})
+    stamp = Path(kernel_cache_folder(str(PACKAGE))) / "sources.sha1"
+    if stamp.is_file() and stamp.read_text().strip() == digest:
+        return 0
+    dropped = 0
+    for folder in folders:
+        cache = Path(kernel_cache_folder(folder))
+        if cache.is_dir():
+            for f in list(cache.glob("*.nbi")) + list(cache.glob("*.nbc")):
+                f.unlink()
+                dropped += 1
+    return dropped
+
+
+def write_stamp(digest: str) -> None:
+    from cvpipe.commands import kernel_cache_folder
+
+    stamp = Path(kernel_cache_folder(str(PACKAGE))) / "sources.sha1"
+    stamp.parent.mkdir(parents=True, exist_ok=True)
+    stamp.write_text(digest + "\n")
 
 
 def compile_all() -> None:
@@ -47,4 +94,7 @@ def compile_all() -> None:
 
 
 if __name__ == "__main__":
+    before = sources_digest()
+    drop_stale_kernels(before)
     compile_all()
+    write_stamp(before)

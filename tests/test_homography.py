@@ -18,6 +18,7 @@ from cvpipe.homography import (
     hartley_normalization,
     transform_points,
 )
+from cvpipe.homography._kernels import _null_vector
 from cvpipe.homography._ransac_kernels import _minimal_solve
 from cvpipe.metrics import corner_error, image_corners
 
@@ -117,6 +118,44 @@ def test_adaptive_bound_stops_early_on_clean_data():
     # at 80 % outliers it needs thousands (log(0.001) / log(1 - 0.2^4) ~ 4300)
     src, dst, _ = scene(outlier_frac=0.8, seed=8)
     assert find_homography(src, dst, rng=0, max_iters=50_000).iterations > 1000
+
+
+def test_the_bound_counts_degenerate_draws():
+    # 290 of 300 noise-free matches on one line, 10 off it: most 4-point draws hold a collinear triple. Every match is
+    # an inlier, so the first regular sample sets the bound to 1 draw; the draws before it count (a draw is
+    # all-inlier with probability w^4 whether or not it is degenerate), so the run reports all of them
+    rng = np.random.default_rng(3)
+    t = rng.uniform(0, 600, 290)
+    src = np.concatenate([np.stack([t, 0.5 * t + 40], axis=1), rng.uniform([0, 0], [W - 1, H_IMG - 1], (10, 2))])
+    dst = transform_points(H_TRUE, src)
+    # P(regular) = P(at most 2 of the 4 on the line) ~ 0.9%, so the first regular draw is rarely the first one
+    iterations = [find_homography(src, dst, rng=seed, refine=False).iterations for seed in range(10)]
+    assert np.median(iterations) > 10
+    fit = find_homography(src, dst, rng=0)
+    assert np.allclose(fit.H, H_TRUE / H_TRUE[2, 2], atol=1e-6)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_null_vector_matches_a_full_eigendecomposition(seed):
+    # a DLT-like 9x9 normal matrix: a small smallest eigenvalue, the others spread over 8 orders of magnitude
+    rng = np.random.default_rng(seed)
+    Q, _ = np.linalg.qr(rng.normal(size=(9, 9)))
+    w = np.concatenate([[10.0 ** rng.uniform(-12, -3)], 10.0 ** np.sort(rng.uniform(-2, 6, 8))])
+    M = (Q * w) @ Q.T
+    h = np.empty(9)
+    assert _null_vector(M, h)
+    # |cos| of the angle to the exact eigenvector: inverse iteration stops at a step below 1e-13, and the
+    # eigenvector itself is determined to about eps * w_max / (w_1 - w_0) <= 1e-8 here
+    assert abs(h @ Q[:, 0]) > 1.0 - 1e-12
+    assert abs(np.linalg.norm(h) - 1.0) < 1e-12
+
+
+def test_null_vector_leaves_a_double_null_space_to_the_caller():
+    # two zero eigenvalues (e.g. all inliers on a line): the iterates do not settle, the caller decides with Jacobi
+    rng = np.random.default_rng(0)
+    Q, _ = np.linalg.qr(rng.normal(size=(9, 9)))
+    M = (Q * np.array([0.0, 0.0, 1, 2, 3, 4, 5, 6, 7])) @ Q.T
+    assert not _null_vector(M, np.empty(9))
 
 
 def test_lo_and_refinement_do_not_hurt_accuracy():

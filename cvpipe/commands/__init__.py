@@ -108,21 +108,25 @@ def kernels_cached(*dispatchers) -> bool:
     count; an index that numba itself finds stale (an edit elsewhere in the file, a numba upgrade) does, so the worst
     case is a missing note.
     """
-    import hashlib
-
     tag = f"py{sys.version_info.major}{sys.version_info.minor}"
-    cache_root = os.environ.get("NUMBA_CACHE_DIR", "")
     for d in dispatchers:
         func = d.py_func
         folder, module_file = os.path.split(os.path.abspath(func.__code__.co_filename))
         index = f"{os.path.splitext(module_file)[0]}.{func.__qualname__}-{func.__code__.co_firstlineno}.{tag}.nbi"
-        # numba looks in one place: under NUMBA_CACHE_DIR when it is set, else in __pycache__
-        place = os.path.join(folder, "__pycache__")
-        if cache_root:
-            place = os.path.join(cache_root, f"{os.path.basename(folder)}_{hashlib.sha1(folder.encode()).hexdigest()}")
-        if not os.path.exists(os.path.join(place, index)):
+        if not os.path.exists(os.path.join(kernel_cache_folder(folder), index)):
             return False
     return True
+
+
+def kernel_cache_folder(folder: str) -> str:
+    """Where numba caches the kernels of the modules in ``folder`` (an absolute path): under ``NUMBA_CACHE_DIR`` when
+    it is set, in ``<folder>_<sha1 of the folder's path>``; else in the folder's ``__pycache__``."""
+    import hashlib
+
+    cache_root = os.environ.get("NUMBA_CACHE_DIR", "")
+    if cache_root:
+        return os.path.join(cache_root, f"{os.path.basename(folder)}_{hashlib.sha1(folder.encode()).hexdigest()}")
+    return os.path.join(folder, "__pycache__")
 
 
 def numba_kernels(module) -> list:

@@ -8,11 +8,13 @@ import math
 import numpy as np
 from numba import njit
 
-from .._kernels import cholesky_solve  # the one SPD solve, shared with the panorama's adjustment
+from .._kernels import cholesky_factor, cholesky_solve, cholesky_substitute  # the one SPD solve (shared)
 
 #: relative size of the smaller principal axis below which a whole point set counts as collinear (1e-7: the
 #: 2x2 covariance resolves eigenvalue ratios down to ~1e-15, i.e. axis ratios down to ~3e-8)
 _ALL_COLLINEAR_EPS = 1e-7
+#: most inverse-iteration steps of :func:`_null_vector` (enough for a factor of 0.45 a step)
+_NULL_STEPS = 40
 #: index into the 6 unique entries (xx, xy, x, yy, y, 1) of a symmetric 3x3 p p^T
 _SYM6 = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]], dtype=np.int64)
 
@@ -221,6 +223,50 @@ def _lm_cost(p, xs, ys, us, vs, ws):
 
 
 @njit(cache=True, error_model="numpy")
+def _null_vector(M, h):
+    """The unit eigenvector of the smallest eigenvalue of the symmetric positive semi-definite ``M`` (n x n) into
+    ``h``, by inverse iteration with the Cholesky factor of ``M + sigma I`` (``sigma = 1e-12 trace M``); True when
+    the iterates settled (a step moved them by less than 1e-13).
+
+    The iterates approach the eigenvector by the factor ``(w0 + sigma) / (w1 + sigma)`` a step (``w0 <= w1`` the two
+    smallest eigenvalues), so settling within ``_NULL_STEPS`` steps means ``w1 > sigma > 1e-14 w_max``: the
+    smallest eigenvalue is simple, as :func:`_lsq` requires. False (the factor is close to 1, or ``M`` is not
+    positive semi-definite): the caller decides with :func:`_jacobi_eigh`.
+    """
+    n = M.shape[0]
+    tr = 0.0
+    for i in range(n):
+        tr += M[i, i]
+    if not (tr > 0.0 and tr < np.inf):
+        return False
+    L = np.zeros((n, n))
+    if not cholesky_factor(M, L, 1e-12 * tr):
+        return False
+    x = np.empty(n)
+    y = np.empty(n)
+    for i in range(n):  # a fixed start with no special direction
+        x[i] = 1.0 / (i + 1.0)
+    for step in range(_NULL_STEPS):
+        cholesky_substitute(L, x, y)
+        norm = 0.0
+        dot = 0.0
+        for i in range(n):
+            norm += y[i] * y[i]
+            dot += y[i] * x[i]
+        scale = (1.0 if dot >= 0.0 else -1.0) / math.sqrt(norm)
+        change = 0.0
+        for i in range(n):
+            yi = y[i] * scale
+            change = max(change, abs(yi - x[i]))
+            x[i] = yi
+        if change < 1e-13 and step > 0:
+            for i in range(n):
+                h[i] = x[i]
+            return True
+    return False
+
+
+@njit(cache=True, error_model="numpy")
 def _lsq(src, dst, mask):
     """Hartley-normalized DLT on the masked correspondences via the 9x9 normal matrix; (H, ok)."""
     H = np.zeros((3, 3))
@@ -289,13 +335,17 @@ def _lsq(src, dst, mask):
             M[3 + a, 6 + b] = -Sv[k]
             M[6 + a, 3 + b] = -Sv[k]
             M[6 + a, 6 + b] = Suv[k]
-    V = np.empty((9, 9))
-    w = _jacobi_eigh(M, V)
-    if not (w[1] > 1e-14 * w[8]):
-        return H, False
+    h = np.empty(9)
+    if not _null_vector(M, h):
+        V = np.empty((9, 9))
+        w = _jacobi_eigh(M, V)
+        if not (w[1] > 1e-14 * w[8]):
+            return H, False
+        for k in range(9):
+            h[k] = V[k, 0]
     Hn = np.empty((3, 3))
     for k in range(9):
-        Hn[k // 3, k % 3] = V[k, 0]
+        Hn[k // 3, k % 3] = h[k]
     _denormalize(Hn, _similarity(ss, -ss * cx, -ss * cy), _similarity(1.0 / sd, cX, cY), np.empty((3, 3)), H)
     if H[2, 2] != 0.0:
         H /= H[2, 2]
