@@ -4,9 +4,13 @@ import os as _os
 
 __version__ = "0.1.0"
 
-# numba's OpenMP threading layer busy-waits at the end of every parallel region. Our kernels are many short parallel
-# regions, and on a 2-core machine that also runs other work the waiting thread competes with the one still working:
-# stereo on tsukuba took 89 ms with OpenMP and 58 ms with numba's own workqueue layer (which sleeps instead) in the
-# same conditions. A default only: NUMBA_THREADING_LAYER set by the user wins, and it has no effect if numba was
-# imported before cvpipe.
-_os.environ.setdefault("NUMBA_THREADING_LAYER", "workqueue")
+# numba's parallel kernels run on its OpenMP threading layer (GNU libgomp), whose threads sleep as soon as a parallel
+# region ends (OMP_WAIT_POLICY=PASSIVE): libgomp's default spins for a while after every region, and on a 2-core machine
+# that also runs other work the spinning thread competes with the one still working (and slows the OpenCV call that
+# follows ours). numba's own workqueue layer also sleeps, but starts a region in 0.3-0.5 ms against OpenMP's 0.06 ms and
+# splits the Hough vote of 20,000 edge pixels 1.1x faster on 2 threads where OpenMP does 1.75x (docs/notes/threads.md).
+# Defaults only: NUMBA_THREADING_LAYER, NUMBA_THREADING_LAYER_PRIORITY or OMP_WAIT_POLICY set by the user win (numba
+# falls back to TBB, then workqueue, where libgomp is missing), and they have no effect if numba or another OpenMP
+# program was loaded before cvpipe.
+_os.environ.setdefault("NUMBA_THREADING_LAYER_PRIORITY", "omp tbb workqueue")
+_os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")

@@ -180,11 +180,11 @@ def _grid(h: int, w: int, rho: float, theta: float, min_theta: float, max_theta:
 # ------------------------------------------------------------------------------------------------- standard
 
 
-#: fewer votes than this (edge pixels x angles) are cast on one thread. On 2 cores (numba's workqueue layer, idle
-#: machine, best of 31 calls) the parallel vote of a York Urban photo took 0.52-0.60x cv2.HoughLines' time (OpenCV
-#: 5.1) from 2M votes up, one thread 0.75-0.85x; below about 1.5M votes (the samples' drawings, 0.5M) starting the
-#: threads costs more than the second core saves
-_PARALLEL_MIN_VOTES = 2_000_000
+#: fewer votes than this (edge pixels x angles) are cast on one thread. On 2 cores (numba's OpenMP layer with
+#: passive waiting, see :mod:`cvpipe`; idle machine, best of 51 calls) a parallel region costs about 0.06 ms to start:
+#: both threads break even with one at 0.2-0.4M votes and take 0.83x its time at 0.5M (the samples' drawings), 0.58x
+#: at 2M and 0.52x at 6.5M (York Urban photos: 1.5-13M)
+_PARALLEL_MIN_VOTES = 400_000
 
 
 def _use_parallel(parallel: bool | None, votes: int | None = None) -> bool:
