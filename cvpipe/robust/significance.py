@@ -33,13 +33,14 @@ def log10_nfa(inliers: int, matches: int, p: float, sample_size: int = 4) -> flo
     >>> log10_nfa(40, 100, 0.01) < 0 < log10_nfa(6, 100, 0.01)  # 40 of 100 agree: no chance; 6: chance
     True
     """
-    from scipy.special import bdtrc, gammaln
+    from scipy.special import bdtrc  # imported here: most commands never test significance
 
+    # math.lgamma: on Python ints several times faster than scipy's gammaln ufunc, to the same few ulps
     n, k, s = int(matches), int(inliers), int(sample_size)
     if n < s or k < s:
         return float("inf")
     p = min(max(float(p), 0.0), 1.0)
-    log_models = (gammaln(n + 1) - gammaln(s + 1) - gammaln(n - s + 1)) / math.log(10)
+    log_models = (math.lgamma(n + 1) - math.lgamma(s + 1) - math.lgamma(n - s + 1)) / math.log(10)
     if k == s or p >= 1.0:
         return float(log_models)
     j = k - s
@@ -47,7 +48,7 @@ def log10_nfa(inliers: int, matches: int, p: float, sample_size: int = 4) -> flo
         return float("-inf")
     tail = float(bdtrc(j - 1, n - s, p))  # P[X > j - 1] = P[X >= j]
     if tail <= 0.0:  # underflow: the first term of the tail bounds it from below and stays finite in logs
-        tail_log = (gammaln(n - s + 1) - gammaln(j + 1) - gammaln(n - s + 1 - j) + j * math.log(p)
+        tail_log = (math.lgamma(n - s + 1) - math.lgamma(j + 1) - math.lgamma(n - s + 1 - j) + j * math.log(p)
                     + (n - s - j) * math.log1p(-p)) / math.log(10)
         return float(log_models + tail_log)
     return float(log_models + math.log10(tail))
