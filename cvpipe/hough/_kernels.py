@@ -104,22 +104,17 @@ def _peaks(acc, threshold):
     nr = acc.shape[1] - 2
     width = np.int64(nr + 2)
     cells = np.int64(na + 2) * width
-    # the cells above the threshold first (two plain scans, the second fills an array of exactly their number), then
-    # the neighbour test on those only
+    # the cells above the threshold first (one plain scan into a buffer that could hold every cell; only the part
+    # written is touched), then the neighbour test on those only
+    candidates = np.empty(na * nr, np.int64)
     above = 0
     for n in range(1, na + 1):
         row = acc[n]
         for r in range(1, nr + 1):
             if row[r] > threshold:
+                candidates[above] = n * width + r
                 above += 1
-    candidates = np.empty(above, np.int64)
-    k = 0
-    for n in range(1, na + 1):
-        row = acc[n]
-        for r in range(1, nr + 1):
-            if row[r] > threshold:
-                candidates[k] = n * width + r
-                k += 1
+    candidates = candidates[:above]
     bases = np.empty(above, np.int64)
     count = 0
     vmax = 0
