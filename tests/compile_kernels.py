@@ -20,8 +20,8 @@ PACKAGE = Path(__file__).resolve().parents[1] / "cvpipe"
 
 
 def sources_digest() -> str:
-    """sha1 of the package's modules that use numba, paths and contents, in a fixed order (an edit elsewhere cannot
-    change a compiled kernel)."""
+    """sha1 of the package's modules that mention numba (those that use it, and a few that only say its name), paths
+    and contents, in a fixed order: an edit elsewhere cannot change a compiled kernel."""
     h = hashlib.sha1()
     for path in sorted(PACKAGE.rglob("*.py")):
         if b"numba" not in path.read_bytes():
