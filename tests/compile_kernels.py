@@ -24,10 +24,17 @@ def sources_digest() -> str:
     and contents, in a fixed order: an edit elsewhere cannot change a compiled kernel."""
     h = hashlib.sha1()
     for path in sorted(PACKAGE.rglob("*.py")):
-        if b"numba" not in path.read_bytes():
-            continue
-        h.update(str(path.relative_to(PACKAGE)).encode() + b"\0" + path.read_bytes() + b"\0")
+        text = path.read_bytes()
+        if b"numba" in text:
+            h.update(str(path.relative_to(PACKAGE)).encode() + b"\0" + text + b"\0")
     return h.hexdigest()
+
+
+def _stamp() -> Path:
+    """The file beside the package's cached kernels that holds the digest they were compiled from."""
+    from cvpipe.commands import kernel_cache_folder
+
+    return Path(kernel_cache_folder(str(PACKAGE))) / "sources.sha1"
 
 
 def drop_stale_kernels(digest: str) -> int:
@@ -36,7 +43,7 @@ def drop_stale_kernels(digest: str) -> int:
     from cvpipe.commands import kernel_cache_folder
 
     folders = sorted({str(p.parent) for p in PACKAGE.rglob("*.py")})
-    stamp = Path(kernel_cache_folder(str(PACKAGE))) / "sources.sha1"
+    stamp = _stamp()
     if stamp.is_file() and stamp.read_text().strip() == digest:
         return 0
     dropped = 0
@@ -50,9 +57,7 @@ def drop_stale_kernels(digest: str) -> int:
 
 
 def write_stamp(digest: str) -> None:
-    from cvpipe.commands import kernel_cache_folder
-
-    stamp = Path(kernel_cache_folder(str(PACKAGE))) / "sources.sha1"
+    stamp = _stamp()
     stamp.parent.mkdir(parents=True, exist_ok=True)
     stamp.write_text(digest + "\n")
 
