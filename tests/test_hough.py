@@ -104,6 +104,22 @@ def test_no_edges_gives_no_lines():
     assert hough.hough_lines_probabilistic(empty, threshold=1, rng=0).shape == (0, 4)
 
 
+@pytest.mark.parametrize("shape", [(1, 1), (1, 7), (3, 5), (8, 8), (7, 9), (241, 317)])
+@pytest.mark.parametrize("density", [0.0, 0.03, 0.5, 1.0])
+def test_edge_points_are_the_nonzero_pixels_in_row_major_order(shape, density):
+    # the scan reads eight pixels at a time: sizes that are and are not multiples of 8 (a tail of 0-7 pixels),
+    # empty, sparse, dense and full maps, any nonzero value
+    from cvpipe.hough import _kernels
+
+    rng = np.random.default_rng(shape[0] * 1000 + shape[1])
+    edges = ((rng.random(shape) < density) * rng.integers(1, 256, shape)).astype(np.uint8)
+    xs, ys = _kernels._edge_points(edges)
+    rows, cols = np.nonzero(edges)
+    assert xs.dtype == ys.dtype == np.float32
+    np.testing.assert_array_equal(xs, cols)
+    np.testing.assert_array_equal(ys, rows)
+
+
 # ------------------------------------------------------------------------------------------------ OpenCV parity
 
 
