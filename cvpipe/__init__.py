@@ -14,3 +14,8 @@ __version__ = "0.1.0"
 # program was loaded before cvpipe.
 _os.environ.setdefault("NUMBA_THREADING_LAYER_PRIORITY", "omp tbb workqueue")
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+# numpy's OpenBLAS on one thread: cvpipe runs its own work in parallel (numba, OpenCV, thread pools, Dask), and an
+# OpenBLAS thread spins for a while after every call, taking a core from that work (in-process stitch on the
+# samples' motorcycle set 132 -> 100 ms, its features 89 -> 62 ms; docs/notes/threads.md). Like the lines above, a
+# default that the user's setting overrides and that has no effect if numpy was imported before cvpipe.
+_os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
