@@ -122,6 +122,13 @@ def _peaks(acc, threshold):
     above = 0
     for n in range(1, na + 1):
         row = acc[n]
+        # most angles of a drawing or a photo have no cell above the threshold: their row's maximum (a loop that
+        # vectorizes) rules them out before the branchy scan
+        top = np.int32(0)
+        for r in range(1, nr + 1):
+            top = max(top, row[r])
+        if top <= threshold:
+            continue
         for r in range(1, nr + 1):
             if row[r] > threshold:
                 candidates[above] = n * width + r
