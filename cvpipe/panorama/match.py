@@ -292,7 +292,7 @@ def match_graph(feats: Sequence[Features], sizes: Sequence[tuple[int, int]], *, 
             index[j] = MatchIndex(feats[j].descriptors)
         return index[j].query(feats[i].descriptors, ratio=ratio)
 
-    with ThreadPoolExecutor(_workers()) as pool:  # OpenCV's matchers and gemm release the GIL
+    with ThreadPoolExecutor(_workers()) as pool:  # OpenCV's matchers and numpy's product release the GIL
         if binary:
             trains = sorted({j for _, j in todo})
             index.update(zip(trains, pool.map(lambda j: MatchIndex(feats[j].descriptors), trains)))
