@@ -74,6 +74,9 @@ def _cost_volume(pad_l, pad_r, ry, rx, planes_l, planes_r, ad_cap, ad_mult, inva
             # unsigned indices: a signed base + d would cost numba's wraparound test per load (no per-pixel views,
             # which cost two atomic reference-count updates each)
             base = np.uint64(w - 1 - x)
+            # the AD term in int32 throughout (numba widens int32 arithmetic to int64, so every step is cast back):
+            # in int64 lanes, with a 64-bit multiply, the colour loop took 5.1 ms on teddy instead of 4.5 ms.
+            # ad_cap * ad_mult < 2**24 (disparity_sgm keeps the cost <= 255), so the product fits
             if ad_mult > 0 and nch == 3:
                 # colour: the whole cost in one loop (the common case; about 20 % faster than a loop per channel)
                 l0 = np.int32(planes_l[y, x, 0])
@@ -81,8 +84,11 @@ def _cost_volume(pad_l, pad_r, ry, rx, planes_l, planes_r, ad_cap, ad_mult, inva
                 l2 = np.int32(planes_l[y, x, 2])
                 for d in range(nd):
                     i = base + np.uint64(d)
-                    ad = (abs(l0 - rev_planes[0, i]) + abs(l1 - rev_planes[1, i]) + abs(l2 - rev_planes[2, i]))
-                    cost[y, x, d] = np.uint8(_popcount(cl ^ rev[i]) + ((min(ad, ad_cap) * ad_mult) >> 16))
+                    a0 = np.int32(abs(np.int32(l0 - rev_planes[0, i])))
+                    a1 = np.int32(abs(np.int32(l1 - rev_planes[1, i])))
+                    a2 = np.int32(abs(np.int32(l2 - rev_planes[2, i])))
+                    ad = np.int32(min(np.int32(np.int32(a0 + a1) + a2), ad_cap))
+                    cost[y, x, d] = np.uint8(np.uint8(_popcount(cl ^ rev[i])) + np.uint8(np.int32(ad * ad_mult) >> 16))
             else:
                 for d in range(nd):
                     cost[y, x, d] = np.uint8(_popcount(cl ^ rev[base + np.uint64(d)]))
@@ -92,9 +98,9 @@ def _cost_volume(pad_l, pad_r, ry, rx, planes_l, planes_r, ad_cap, ad_mult, inva
                     for c in range(nch):
                         lv = np.int32(planes_l[y, x, c])
                         for d in range(nd):
-                            adsum[d] += abs(lv - rev_planes[c, base + np.uint64(d)])
+                            adsum[d] += np.int32(abs(np.int32(lv - rev_planes[c, base + np.uint64(d)])))
                     for d in range(nd):
-                        cost[y, x, d] += np.uint8((min(adsum[d], ad_cap) * ad_mult) >> 16)
+                        cost[y, x, d] += np.uint8(np.int32(np.int32(min(adsum[d], ad_cap)) * ad_mult) >> 16)
             for d in range(nd, max_disp):
                 cost[y, x, d] = invalid_cost
     return cost
