@@ -136,6 +136,63 @@ def test_textureless_window():
     assert (~flat).sum() == 15 and not flat[3:6, 3:8].any()
 
 
+def _speckle_reference(disp, max_size, max_jump):
+    """Flood fill of the 4-connected regions (neighbours within ``max_jump``), written out in plain Python."""
+    out = disp.copy()
+    h, w = disp.shape
+    seen = np.zeros((h, w), bool)
+    for y0 in range(h):
+        for x0 in range(w):
+            if seen[y0, x0] or disp[y0, x0] < 0:
+                continue
+            seen[y0, x0] = True
+            region, todo = [], [(y0, x0)]
+            while todo:
+                y, x = todo.pop()
+                region.append((y, x))
+                for yy, xx in ((y + 1, x), (y - 1, x), (y, x + 1), (y, x - 1)):
+                    if (0 <= yy < h and 0 <= xx < w and not seen[yy, xx] and disp[yy, xx] >= 0
+                            and abs(disp[yy, xx] - disp[y, x]) <= max_jump):
+                        seen[yy, xx] = True
+                        todo.append((yy, xx))
+            if len(region) < max_size:
+                for y, x in region:
+                    out[y, x] = -1.0
+    return out
+
+
+def test_speckle_removal_rejects_small_regions_only():
+    from cvpipe.stereo._kernels import _remove_speckles
+
+    d = np.full((6, 8), 5.0, np.float32)
+    d[1, 1:3] = 9.0  # a 2-pixel island: removed
+    d[3:6, 4] = [6.0, 7.0, 8.0]  # a ramp of 1 px steps joined to the plane: one region, kept
+    d[0, 7] = -1.0
+    d[1, 6] = 5.5  # within the jump of the plane around it: kept
+    d[5, 0] = 20.0  # a single pixel: removed
+    out = d.copy()
+    _remove_speckles(out, 3, 1.0)
+    expected = d.copy()
+    expected[1, 1:3] = -1.0
+    expected[5, 0] = -1.0
+    np.testing.assert_array_equal(out, expected)
+
+
+@pytest.mark.parametrize("max_size, max_jump", [(3, 1.0), (6, 0.0), (40, 2.0)])
+def test_speckle_removal_matches_a_flood_fill(max_size, max_jump):
+    """Random maps of few levels (many regions that touch, merge late and wind around each other)."""
+    from cvpipe.stereo._kernels import _remove_speckles
+
+    rng = np.random.default_rng(7)
+    for _ in range(150):
+        h, w = rng.integers(1, 30, 2)
+        d = rng.integers(-1, 4, (h, w)).astype(np.float32)
+        d[d < 0] = -1.0
+        out = d.copy()
+        _remove_speckles(out, max_size, max_jump)
+        np.testing.assert_array_equal(out, _speckle_reference(d, max_size, max_jump))
+
+
 def test_fill_invalid_takes_the_background():
     d = np.array([[5.0, np.nan, np.nan, 2.0], [np.nan, 3.0, np.nan, np.nan], [np.nan] * 4], np.float32)
     out = stereo.fill_invalid(d)

@@ -379,45 +379,76 @@ def _lr_check_row(disp, disp_r, y, max_diff):  # pragma: no cover - compiled
             disp[y, x] = -1.0
 
 
+@njit(cache=True, inline="always")
+def _find_root(parent, i):  # pragma: no cover - compiled
+    """Root of ``i`` in the union-find forest ``parent``, compressing the path on the way."""
+    root = i
+    while parent[root] != root:
+        root = parent[root]
+    while parent[i] != root:
+        nxt = parent[i]
+        parent[i] = root
+        i = nxt
+    return root
+
+
 @njit(cache=True)
 def _remove_speckles(disp, max_size, max_jump):  # pragma: no cover - compiled
-    """Reject 4-connected regions (neighbours within ``max_jump`` px of each other) smaller than ``max_size`` px."""
+    """Reject 4-connected regions (neighbours within ``max_jump`` px of each other) smaller than ``max_size`` px.
+
+    One pass over the rows labels runs (consecutive accepted pixels of a row, each within ``max_jump`` of its left
+    neighbour) and joins each run to the runs above it that it touches within ``max_jump``, in a union-find forest
+    whose roots count their regions' pixels; a second pass rejects the pixels of small regions. The regions are
+    those of a flood fill, in sequential memory order (about 2x faster than a flood fill's stack).
+    """
     h, w = disp.shape
-    label = np.zeros((h, w), np.int32)
-    stack = np.empty(h * w, np.int64)
-    members = np.empty(h * w, np.int64)
-    n_label = 0
-    for y0 in range(h):
-        for x0 in range(w):
-            if label[y0, x0] != 0 or disp[y0, x0] < 0:
+    run = np.empty((h, w), np.int32)
+    parent = np.empty(h * w, np.int32)
+    size = np.empty(h * w, np.int32)  # pixels of a region, valid at its root
+    n = 0
+    for y in range(h):
+        r = -1  # the current run, -1 after a rejected pixel
+        root = -1  # its root: only this row's joins of this run can change it while the run lasts
+        left = np.float32(-1.0)
+        last_r = -1  # the last pair of runs joined on this row: a run touches the same run above over many pixels
+        last_b = -1
+        for x in range(w):
+            d = disp[y, x]
+            if d < 0:
+                run[y, x] = -1
+                r = -1
+                left = d
                 continue
-            n_label += 1
-            label[y0, x0] = n_label
-            top = 0
-            stack[top] = y0 * w + x0
-            top = 1
-            count = 0
-            while top > 0:
-                top -= 1
-                i = stack[top]
-                members[count] = i
-                count += 1
-                y = i // w
-                x = i - y * w
-                dv = disp[y, x]
-                for k in range(4):
-                    yy = y + (1 if k == 0 else (-1 if k == 1 else 0))
-                    xx = x + (1 if k == 2 else (-1 if k == 3 else 0))
-                    if 0 <= yy < h and 0 <= xx < w and label[yy, xx] == 0:
-                        dn = disp[yy, xx]
-                        if dn >= 0 and abs(dn - dv) <= max_jump:
-                            label[yy, xx] = n_label
-                            stack[top] = yy * w + xx
-                            top += 1
-            if count < max_size:
-                for j in range(count):
-                    i = members[j]
-                    disp[i // w, i - (i // w) * w] = -1.0
+            if r < 0 or abs(d - left) > max_jump:
+                r = n
+                root = n
+                parent[n] = n
+                size[n] = 0
+                n += 1
+            size[root] += 1
+            run[y, x] = r
+            left = d
+            if y > 0:
+                b = run[y - 1, x]
+                if b >= 0 and not (r == last_r and b == last_b) and abs(d - disp[y - 1, x]) <= max_jump:
+                    last_r = r
+                    last_b = b
+                    rb = _find_root(parent, b)
+                    if rb > root:
+                        parent[rb] = root
+                        size[root] += size[rb]
+                    elif rb < root:
+                        parent[root] = rb
+                        size[rb] += size[root]
+                        root = rb
+    small = np.empty(n, np.bool_)
+    for i in range(n):
+        small[i] = size[_find_root(parent, i)] < max_size
+    for y in range(h):
+        for x in range(w):
+            r = run[y, x]
+            if r >= 0 and small[r]:
+                disp[y, x] = -1.0
 
 
 @njit(cache=True, parallel=True)
