@@ -136,6 +136,29 @@ def test_textureless_window():
     assert (~flat).sum() == 15 and not flat[3:6, 3:8].any()
 
 
+@pytest.mark.parametrize("window", [(1, 3), (3, 3), (3, 5), (5, 7), (7, 9), (1, 1)])
+def test_census_signatures_match_a_per_neighbour_reference(window):
+    """Signatures of every row against one neighbour at a time in numpy: bit set where the neighbour is darker, the
+    first neighbour in row-major order in the highest bit (windows of 2, 8, 14, 34, 62 and 0 bits)."""
+    from cvpipe.stereo._kernels import _census_row
+
+    ry, rx = window[0] // 2, window[1] // 2
+    img = np.random.default_rng(3).integers(0, 256, (23, 41), dtype=np.uint8)
+    img[5:9, 10:20] = 77  # flat patch: ties are not darker
+    padded = np.pad(img, ((ry, ry), (rx, rx)), mode="edge")
+    h, w = img.shape
+    expected = np.zeros((h, w), np.uint64)
+    for dy in range(2 * ry + 1):
+        for dx in range(2 * rx + 1):
+            if (dy, dx) != (ry, rx):
+                darker = padded[dy:dy + h, dx:dx + w] < img
+                expected = (expected << np.uint64(1)) | darker.astype(np.uint64)
+    row, byte = np.empty(w, np.uint64), np.empty(w, np.uint8)
+    for y in range(h):
+        _census_row(padded, y, ry, rx, row, byte)
+        np.testing.assert_array_equal(row, expected[y])
+
+
 def _speckle_reference(disp, max_size, max_jump):
     """Flood fill of the 4-connected regions (neighbours within ``max_jump``), written out in plain Python."""
     out = disp.copy()
