@@ -64,10 +64,12 @@ class Row:
     detail: dict = field(default_factory=dict)
 
 
-def best_of(fns: dict, repeats: int) -> dict:
-    """Best wall time in seconds of each callable in ``fns``, calls interleaved, after one warm-up call of each."""
-    for fn in fns.values():
-        fn()
+def best_of(fns: dict, repeats: int, warm_up: bool = True) -> dict:
+    """Best wall time in seconds of each callable in ``fns``, calls interleaved, after one warm-up call of each
+    (``warm_up=False``: the callables have just run)."""
+    if warm_up:
+        for fn in fns.values():
+            fn()
     times = {k: float("inf") for k in fns}
     for _ in range(repeats):
         for k, fn in fns.items():
@@ -253,9 +255,9 @@ def row_sgm(ctx: dict) -> list[Row]:
         disp = stereo.disparity_sgm(left, right, nd)
         bad.append(tuple(stereo.evaluate(d, truth, (2.0,))["bad_2.0"] for d in (disp, disp_cv)))
         timed.append((left, right, nd, cfg))
-    def ratio(left, right, nd, cfg, calls):
+    def ratio(left, right, nd, cfg, calls, warm_up=True):
         t = best_of({"ours": lambda: stereo.disparity_sgm(left, right, nd),
-                     "opencv": lambda: stereo.disparity_opencv_sgbm(left, right, nd, **cfg)}, calls)
+                     "opencv": lambda: stereo.disparity_opencv_sgbm(left, right, nd, **cfg)}, calls, warm_up)
         return t["ours"] / t["opencv"]
 
     # ours runs on numba's threads, whose start varies (and tsukuba takes 5 ms in SGBM): more calls for a stable best
@@ -264,7 +266,7 @@ def row_sgm(ctx: dict) -> list[Row]:
     # decides it): the two worst pairs are measured again with 31 calls a side, and that estimate is kept, as the
     # hough row does for its five worst images
     for i in sorted(range(len(ratios)), key=ratios.__getitem__)[-2:]:
-        ratios[i] = ratio(*timed[i], 31)
+        ratios[i] = ratio(*timed[i], 31, warm_up=False)
     better = sum(o <= c for o, c in bad)
     acc = (f"bad-2.0 lower than SGBM's on {better}/{len(bad)} pairs; mean {100 * np.mean([o for o, _ in bad]):.1f} % "
            f"(SGBM {100 * np.mean([c for _, c in bad]):.1f} %)")
@@ -332,7 +334,7 @@ def row_stitch(ctx: dict) -> list[Row]:
     """``panorama.stitch`` / ``cv2.Stitcher`` in this process per set: worst ratio; accuracy: images each used."""
     from .. import io, panorama
 
-    ratios, used, timed = [], [], []
+    ratios, used = [], []
     for name, paths in ctx["progress"](list(_panorama_sets(ctx).items()), "guard stitch"):
         images = [io.read_image(p) for p in paths]
 
@@ -342,18 +344,10 @@ def row_stitch(ctx: dict) -> list[Row]:
             except EstimationError:
                 return None
 
-        pair = {"ours": ours, "opencv": lambda images=images: _cv_stitch(images)}
-        t = best_of(pair, max(1, ctx["repeats"] // 3))
+        t = best_of({"ours": ours, "opencv": lambda: _cv_stitch(images)}, max(1, ctx["repeats"] // 3))
         ratios.append(t["ours"] / t["opencv"])
-        timed.append((pair, t))
         pano = ours()
         used.append((name, len(images), 0 if pano is None else len(pano.registration.used), _cv_stitch(images) is not None))
-    # one run a side read the worst set at 1.13-1.51x between guard runs: that set gets three more runs a side, and
-    # the best of all its runs is kept
-    worst = max(range(len(ratios)), key=ratios.__getitem__)
-    pair, first = timed[worst]
-    again = best_of(pair, 3)
-    ratios[worst] = min(first["ours"], again["ours"]) / min(first["opencv"], again["opencv"])
     acc = "; ".join(f"{n}: ours uses {u}/{k}, OpenCV {'stitched' if c else 'failed'}" for n, k, u, c in used)
     return [Row("stitch_max", max(ratios), "x", "panorama.stitch / cv2.Stitcher in process, worst set", acc,
                 len(ratios))]
