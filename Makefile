@@ -1,10 +1,13 @@
-# `make run`: venv + install + `dvc repro` on the bundled samples.  `make test`: venv + install + the test suite (its
-# fast tier, on every core; minutes).  `make test-all`: the slow tier as well (dvc pipeline runs in copies of the
-# repository, the browser, 81 MP images, real clusters).  `make guard`: the speed guard (`cvpipe bench guard`).
+# `make run`: venv + install (compiles the kernels, about a minute) + `dvc repro` on the bundled samples.  `make test`:
+# venv + install + the test suite (its fast tier, on every core; minutes).  `make test-all`: the slow tier as well (dvc
+# pipeline runs in copies of the repository, the browser, 81 MP images, real clusters).  `make guard`: the speed guard
+# (`cvpipe bench guard`).
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(CURDIR)/$(VENV)/bin
-export NUMBA_CACHE_DIR ?= $(CURDIR)/.numba_cache
+# the build backend and the compiler of the kernels (pyproject.toml's [build-system] requires, the same pins): the
+# editable install builds without isolation, so that importing cvpipe can rebuild an edited .pyx with them
+BUILD_REQUIRES := 'meson-python>=0.16' 'meson>=1.4' 'ninja>=1.11' 'cython>=3.0.10'
 
 .PHONY: run test test-all test-slow guard bench clean-venv
 
@@ -27,10 +30,11 @@ guard: $(VENV)/.installed
 bench: $(VENV)/.installed
 	PATH="$(BIN):$$PATH" $(BIN)/cvpipe bench pipeline
 
-$(VENV)/.installed: pyproject.toml
+$(VENV)/.installed: pyproject.toml meson.build
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[test]'
+	$(BIN)/python -m pip install -q $(BUILD_REQUIRES)
+	PATH="$(BIN):$$PATH" $(BIN)/python -m pip install -q --no-build-isolation -e '.[test]'
 	touch $@
 
 clean-venv:

@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._kernels import cholesky_solve
+from ._linalg import cholesky_solve
 
 
 def solve_spd(A: np.ndarray, b: np.ndarray) -> np.ndarray | None:
-    """Solve the symmetric positive definite system ``A x = b`` single-threaded (Cholesky, numba).
+    """Solve the symmetric positive definite system ``A x = b`` single-threaded (Cholesky, compiled).
 
     The systems are small (8 parameters per image); a threaded LAPACK call costs more in thread start-up than in
     arithmetic on a busy machine.

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._kernels import _largest_rectangle
+from . import _crop
 
 
 def largest_rectangle(mask: np.ndarray) -> tuple[int, int, int, int]:
@@ -29,4 +29,4 @@ def largest_rectangle(mask: np.ndarray) -> tuple[int, int, int, int]:
     mask = np.asarray(mask)
     if mask.ndim != 2:
         raise ValueError(f"`mask` must be 2-D, got shape {mask.shape}")
-    return tuple(int(v) for v in _largest_rectangle(np.ascontiguousarray(mask != 0)))
+    return tuple(int(v) for v in _crop.largest_rectangle(np.ascontiguousarray(mask != 0).view(np.uint8)))
