@@ -22,26 +22,6 @@ settings.register_profile("explore", derandomize=False)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repeatable"))
 
 
-@pytest.fixture(scope="session", autouse=True)
-def numba_kernels_compiled(tmp_path_factory):
-    """Every task's numba kernels compiled and cached before the first test (tests/compile_kernels.py says why).
-
-    In a subprocess with this session's environment (its NUMBA_CACHE_DIR); the pytest-xdist workers share a lock file
-    in the session's temporary folder, so one compiles (about a minute on a cold cache) while the others wait, then
-    find the cache warm (a few seconds).
-    """
-    import fcntl
-    import subprocess
-    import sys
-
-    shared = tmp_path_factory.getbasetemp().parent
-    with open(shared / "numba-kernels.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        proc = subprocess.run([sys.executable, str(ROOT / "tests" / "compile_kernels.py")], cwd=ROOT,
-                              capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stderr
-
-
 @pytest.fixture(scope="session")
 def repo_root() -> Path:
     return ROOT

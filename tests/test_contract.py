@@ -133,11 +133,11 @@ def test_unexpected_exception_is_one_line_exit_1(capsys, monkeypatch, views):
 # ------------------------------------------------------------------------------------------------------ Ctrl-C
 
 
-def test_keyboard_interrupt_wrapped_by_numba_is_exit_130(capsys, monkeypatch, views):
+def test_keyboard_interrupt_wrapped_by_an_extension_is_exit_130(capsys, monkeypatch, views):
     def parallel_kernel(*a, **k):
         try:
             raise KeyboardInterrupt
-        except KeyboardInterrupt as exc:  # what numba's parallel launcher turns a Ctrl-C into
+        except KeyboardInterrupt as exc:  # what a C extension that returns with the exception set turns it into
             raise SystemError("<built-in function ...> returned a result with an exception set") from exc
 
     monkeypatch.setattr(hough, "edges_of", parallel_kernel)
@@ -228,7 +228,6 @@ def test_entry_point_is_light_and_is_the_console_script():
 
 
 def _stereo_command(left, right, out) -> list:
-    # -q: a cold numba cache adds the one-time compile note on stderr, which is not what this test is about
     # `-m cvpipe`: the program's entry point, as the console script runs it
     return [sys.executable, "-m", "cvpipe", "-q", "stereo", str(left), str(right), "--max-disp", "128", "-o",
             str(out / "d.npy"), "--json"]
@@ -242,10 +241,10 @@ def _threads(pid: int) -> int | None:
 
 
 def _peak_threads(cmd) -> int:
-    """The most threads a run of ``cmd`` has at once: numba's worker pool starts with the first parallel kernel and
-    is the last to appear, so reaching this count means the kernels run (it was 6 here, 7 on another machine)."""
+    """The most threads a run of ``cmd`` has at once: the OpenMP team starts with the first parallel kernel and is
+    the last to appear, so reaching this count means the kernels run."""
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            env=dict(ENV, NUMBA_NUM_THREADS="2"))
+                            env=dict(ENV, OMP_NUM_THREADS="2"))
     peak = 1
     while proc.poll() is None:
         peak = max(peak, _threads(proc.pid) or 0)
@@ -261,7 +260,7 @@ def _interrupt_stereo(cmd, out, delay, peak=None, second=None):
     one whose results went out whole (checked here): exit 0 when the signal came after the process ended, or 130
     and the one line when it came while they went out or during the shutdown."""
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=dict(ENV, NUMBA_NUM_THREADS="2"))
+                            env=dict(ENV, OMP_NUM_THREADS="2"))
     t0 = time.monotonic()
     while proc.poll() is None and time.monotonic() - t0 < 300:
         n = _threads(proc.pid)
@@ -300,10 +299,10 @@ def _stereo_pair(tmp_path):
     left, right = tmp_path / "l.png", tmp_path / "r.png"
     cv2.imwrite(str(left), t[:, :1000])
     cv2.imwrite(str(right), t[:, 20:1020])
-    # the tests are about interrupting the running kernels, not numba's one-time compilation: warm the cache first
+    # a first run warms the file system cache and measures the run's length
     t0 = time.monotonic()
     subprocess.run([sys.executable, "-m", "cvpipe", "-q", "stereo", str(left), str(right), "--max-disp", "128",
-                    "-o", str(tmp_path / "warm.npy")], env=dict(ENV, NUMBA_NUM_THREADS="2"), check=True,
+                    "-o", str(tmp_path / "warm.npy")], env=dict(ENV, OMP_NUM_THREADS="2"), check=True,
                    capture_output=True, timeout=600)
     return left, right, time.monotonic() - t0
 
@@ -311,7 +310,7 @@ def _stereo_pair(tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("when", ["start-up", "parallel kernels"])
 def test_ctrl_c_during_parallel_stereo(tmp_path, when):
-    """A real SIGINT during start-up (imports, numba's cache load) or while numba's parallel SGM runs: exit 130,
+    """A real SIGINT during start-up (imports) or while the parallel SGM kernels run: exit 130,
     one line, no traceback, nothing written."""
     left, right, _ = _stereo_pair(tmp_path)
     out = tmp_path / "out"
@@ -319,10 +318,10 @@ def test_ctrl_c_during_parallel_stereo(tmp_path, when):
     peak = None if when == "start-up" else _peak_threads(cmd)
     if (out / "d.npy").exists():
         (out / "d.npy").unlink()
-    # the kernels take a few tenths of a ~2 s run: up to 5 runs, the signal sent 0-150 ms after numba's workers
+    # the kernels take a few tenths of a run: up to 5 runs, the signal sent 0-150 ms after the OpenMP threads
     # appeared, until one lands before the work is done
-    # start-up: the imports and numba's cache load take the first second or so
-    for delay in ([0.5, 0.3, 0.8] if when == "start-up" else [0.0, 0.03, 0.06, 0.1, 0.15]):
+    # start-up: the imports take the first few tenths of a second
+    for delay in ([0.1, 0.2, 0.3] if when == "start-up" else [0.0, 0.03, 0.06, 0.1, 0.15]):
         done = _interrupt_stereo(cmd, out, delay, peak)
         if done is not None:
             break
@@ -333,8 +332,8 @@ def test_ctrl_c_during_parallel_stereo(tmp_path, when):
 
 @pytest.mark.slow
 def test_ctrl_c_at_any_moment_of_parallel_stereo(tmp_path):
-    """SIGINT at 40 moments spread over whole runs of the parallel stereo command (imports, numba's cache load,
-    the parallel kernels, the writing of the results, the shutdown), one alone or two 5 ms apart: every run ends
+    """SIGINT at 40 moments spread over whole runs of the parallel stereo command (imports, the parallel kernels,
+    the writing of the results, the shutdown), one alone or two 5 ms apart: every run ends
     either interrupted (exit 130, the one line and the record, nothing written) or with its complete result (exit
     0), never by a signal."""
     left, right, seconds = _stereo_pair(tmp_path)

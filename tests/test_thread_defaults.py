@@ -1,4 +1,4 @@
-"""The threading defaults that ``import cvpipe`` sets before numpy and numba load (``cvpipe/__init__.py``): set when
+"""The threading defaults that ``import cvpipe`` sets before numpy and OpenMP load (``cvpipe/__init__.py``): set when
 the user has not, left alone when the user has, and in effect (OpenBLAS starts no thread of its own)."""
 
 from __future__ import annotations
@@ -13,8 +13,7 @@ import pytest
 
 from conftest import ROOT
 
-DEFAULTS = {"NUMBA_THREADING_LAYER_PRIORITY": "omp tbb workqueue", "OMP_WAIT_POLICY": "PASSIVE",
-            "OPENBLAS_NUM_THREADS": "1"}
+DEFAULTS = {"OMP_WAIT_POLICY": "PASSIVE", "OPENBLAS_NUM_THREADS": "1"}
 
 PROBE = """
 import json, os, sys
@@ -40,8 +39,7 @@ def test_import_sets_the_thread_defaults():
 
 
 def test_the_users_settings_win():
-    mine = {"NUMBA_THREADING_LAYER_PRIORITY": "workqueue tbb omp", "OMP_WAIT_POLICY": "ACTIVE",
-            "OPENBLAS_NUM_THREADS": "2"}
+    mine = {"OMP_WAIT_POLICY": "ACTIVE", "OPENBLAS_NUM_THREADS": "2"}
     assert _probe(**mine)["env"] == mine
 
 

@@ -6,7 +6,7 @@ import argparse
 
 from ..params import FeaturesParams, HomographyEstimateParams, MatchParams
 from . import (DETECTORS, add_feature_arguments, add_param_options, add_result_arguments,  # noqa: F401
-               compile_note, final_output, step)  # DETECTORS: the --detector choices (a test keeps them equal)
+               final_output, step)  # DETECTORS: the --detector choices (a test keeps them equal)
 
 HELP = "estimate the homography mapping image A to image B (ours or OpenCV's RANSAC/MAGSAC)"
 EXAMPLE = ("cvpipe homography data/samples/homography/0_astronaut_a.jpg data/samples/homography/0_astronaut_b.jpg "
@@ -49,8 +49,6 @@ def run(args: argparse.Namespace) -> int:
     with step("read"):
         a = io.read_image(args.a, "gray")
         b = io.read_image(args.b, "gray")
-    if args.method == "ours":  # after the reads: a bad image fails first, without the note
-        compile_note("homography", homography)
     with step(f"features ({args.detector}) and matches"):
         src, dst = homography.correspondences(a, b, args.detector, args.max_features, args.ratio)
     if len(src) < 4:

@@ -7,7 +7,7 @@ import math
 import sys
 
 from ..params import HoughEdgesParams, HoughLinesParams
-from . import add_result_arguments, compile_note, final_output, note, overlay_paths, progress, read_images, step
+from . import add_result_arguments, final_output, note, overlay_paths, progress, read_images, step
 
 HELP = "find straight lines (standard Hough transform, cv2.HoughLines conventions)"
 EXAMPLE = "cvpipe hough data/samples/hough/synthetic_grid.png --threshold 100 --max-lines 10 --overlay lines.png"
@@ -87,15 +87,6 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"`--theta-deg` must be > 0, got {args.theta_deg}")
     if args.max_lines < 0:
         raise InputError(f"`--max-lines` must be >= 0 (0 = all), got {args.max_lines}")
-    announce = None
-    if method == "ours":
-        # the serial or the parallel vote, whichever this run will use (hough_accumulator's own choice)
-        from ..hough import _kernels, transform
-
-        vote = _kernels._vote_parallel if transform._use_parallel(None) else _kernels._vote_serial
-
-        def announce():  # once an image was read: a bad image fails first, without the note
-            compile_note("hough", (_kernels, [_kernels._edge_points, vote, _kernels._peaks]))
     scheduler = check_scheduler(args.scheduler, "--scheduler")
     # the flags go into the sections unvalidated (model_copy): the library checks them and names the values, and
     # the checks above name the flags
@@ -107,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     io.check_distinct_outputs([("`--overlay`", p) for p in pictures],
                               [(f"IMAGE {k + 1}", path) for k, path in enumerate(args.image)])
     with step(f"lines ({method})"):
-        images = read_images(args.image, "gray", first_read=announce)
+        images = read_images(args.image, "gray")
         results = list(progress(map_items(image_lines, images, shared=shared, scheduler=scheduler,
                                           total=len(args.image)), "hough", total=len(args.image)))
     records, errors = [], []

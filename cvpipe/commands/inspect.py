@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..params import InspectParams, replace
-from . import (DETECTORS, add_result_arguments, compile_note, final_output, overlay_paths, progress, read_images,
+from . import (DETECTORS, add_result_arguments, final_output, overlay_paths, progress, read_images,
                with_flags)
 
 if TYPE_CHECKING:
@@ -112,7 +112,7 @@ def inspect_probe(item: tuple, shared: tuple) -> defects.Inspection:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .. import defect as defects, homography, io
+    from .. import defect as defects, io
     from ..compute import check_scheduler, item_error, map_items, raise_unexpected
     from ..errors import EstimationError, InputError
     from ..features import detect_with
@@ -134,14 +134,11 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"{args.reference}: the reference is blank (one grey level {int(ref_gray.min())}); "
                          "nothing to register probes to", file=args.reference)
 
-    def announce():  # once a probe was read: bad inputs fail first, without the note
-        compile_note("inspect", homography)
-
     ref_feats = detect_with(ref_gray, params.features)
     results, errors = [], []
     # checked before any probe runs: a bad address is one line and nothing is written
     scheduler = check_scheduler(args.scheduler, "--scheduler")
-    items = map_items(inspect_probe, read_images(args.probes, "color", first_read=announce), shared=(ref_gray, ref_feats, params),
+    items = map_items(inspect_probe, read_images(args.probes, "color"), shared=(ref_gray, ref_feats, params),
                       scheduler=scheduler, total=len(args.probes))
     # the results first: the bar counts probes done, not started
     for res, (path, stem, picture) in zip(items, progress(list(zip(args.probes, stems, pictures)), "inspect")):

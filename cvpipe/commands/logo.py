@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..params import LogoFeaturesParams, LogoMatchParams, LogoVerifyParams
-from . import (DETECTORS, add_feature_arguments, add_result_arguments, compile_note, final_output,  # noqa: F401
+from . import (DETECTORS, add_feature_arguments, add_result_arguments, final_output,  # noqa: F401
                overlay_paths, progress, read_images,
                step)  # DETECTORS: the ``--method`` choices (a test keeps them equal)
 
@@ -139,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(str(exc).replace("`ratio`", "`--ratio`")) from exc
     if args.min_long_side < 0:
         raise InputError(f"`--min-long-side` must be a non-negative number of pixels, got {args.min_long_side}")
-    from .. import homography, logo
+    from .. import logo
 
     scheduler = check_scheduler(args.scheduler, "--scheduler")
     pictures = overlay_paths(args.scenes, args.overlay, SUFFIX)
@@ -151,8 +151,7 @@ def run(args: argparse.Namespace) -> int:
                                mp.reference_features)
     records, failed = [], 0
     shared = (g, args.method, args.max_features, args.min_long_side, mp, vp, args.seed)
-    # the note once a scene was read: gallery and scene errors come first, without it
-    scenes = read_images(args.scenes, "gray", named=True, first_read=lambda: compile_note("logo", homography))
+    scenes = read_images(args.scenes, "gray", named=True)
     items = map_items(recognize_scene, scenes, shared=shared, scheduler=scheduler,
                       total=len(args.scenes))
     # the results first: the bar counts scenes done, not started

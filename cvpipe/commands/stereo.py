@@ -10,7 +10,7 @@ import sys
 from typing import TYPE_CHECKING
 
 from ..params import StereoBmParams, StereoSgbmParams, StereoSgmParams
-from . import compile_note, final_output, note, step
+from . import final_output, note, step
 
 if TYPE_CHECKING:
     import numpy as np
@@ -99,10 +99,6 @@ def run(args: argparse.Namespace) -> int:
     info, geometry, left, right, auto_disp = _prepare(args, left, right, calib)
     max_disp = auto_disp if args.max_disp == "auto" else args.max_disp
     method, params_cls = args.method, CLI_METHODS[args.method]
-    if method == "sgm":
-        from ..stereo import _kernels
-
-        compile_note("stereo", _kernels)
     with step(f"disparity ({method})"):
         disp = stereo.disparity_with(left, right, max_disp, params_cls(), method)
     z = None

@@ -9,7 +9,7 @@ from pathlib import Path
 from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
                       PanoramaWarpParams, replace)
 from . import (DETECTORS, add_feature_arguments, add_param_options, add_result_arguments,  # noqa: F401
-               compile_note, final_output, log, progress, step, with_flags)
+               final_output, log, progress, step, with_flags)
 
 HELP = "stitch overlapping photos (any order) into one seamless, cropped panorama"
 EXAMPLE = "cvpipe stitch data/samples/panorama/coffee/*.jpg -o pano.png --projection plane --json"
@@ -71,9 +71,9 @@ def _compose_within_budget(images: list, compose_megapix: float) -> float:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from .. import _kernels as shared_kernels, homography, io
+    from .. import io
     from ..errors import EstimationError, InputError
-    from ..panorama import _kernels, stitch
+    from ..panorama import stitch
 
     # before any work: a panorama that cannot be written must not cost the stitching first
     io.check_output_path(args.out, "`-o`", io.IMAGE_WRITE_SUFFIXES)
@@ -106,7 +106,6 @@ def run(args: argparse.Namespace) -> int:
                           gain_block=args.gain_block))
     except ValueError as exc:
         raise InputError(with_flags(str(exc), _HINTED + ("ratio", "compose_megapix", "gain_block"))) from exc
-    compile_note("panorama", homography, shared_kernels, _kernels)
     try:
         with step(f"stitch {len(images)} images"):
             pano = stitch(images, **params, crop=not args.no_crop, rng=args.seed,
