@@ -10,14 +10,17 @@ the highest one that every such machine has (AVX2 and FMA, x86-64-v3):
   different results on the same input);
 - ``OPENCV_CPU_DISABLE``: OpenCV's dispatched code stops at AVX2 (its SIFT output changes with the dispatched path);
   only the levels above AVX2 that the CPU has are named (OpenCV warns about the others on every start);
-- ``OPENCV_IPP=AVX2``: the Intel IPP functions inside OpenCV (filters, resizing, warps) take their AVX2 code, not
-  their AVX-512 code;
+- ``OPENCV_IPP=disabled``: no Intel IPP inside OpenCV. IPP picks its code per CPU and per level (filters, resizing,
+  warps, and so SIFT's pyramid): ``OPENCV_IPP`` AVX2, SSE42 and ``disabled`` give three different SIFT outputs on one
+  machine, and IPP is known to take other code paths on non-Intel CPUs, so no level of it is the same on Intel and
+  AMD. Off, OpenCV runs its own dispatched code, pinned by the line above (measured: SIFT, resizes and warps of ten
+  sample photos 5 % slower than with IPP's AVX2 code);
 - ``NPY_DISABLE_CPU_FEATURES``: numpy's AVX-512 loops are off (measured: ``np.argsort`` orders ties differently and
   ``np.arctan2`` differs in the last bit between its AVX-512 and AVX2 loops). Names a numpy build does not dispatch
   are ignored by it with an ImportWarning, hidden by default; features the machine lacks are ignored silently.
 
-numba's kernels are compiled for the host CPU but without fast-math, so their results do not depend on it (measured
-with ``NUMBA_CPU_NAME`` haswell, skylake-avx512 and the host: the same bytes); they are not pinned.
+cvpipe's own kernels need no pin: they are compiled once, for x86-64-v3, without fast-math and without contraction
+into FMA (meson.build), so every such CPU runs the same instructions on the same data.
 """
 
 import os
@@ -48,8 +51,10 @@ def _opencv_disable() -> str:
 PINNED_ENV = {
     "OPENBLAS_CORETYPE": "Haswell",
     "OPENCV_CPU_DISABLE": _opencv_disable(),
-    "OPENCV_IPP": "AVX2",
+    "OPENCV_IPP": "disabled",
     "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR AVX512F AVX512_SKX",
 }
 
 os.environ.update(PINNED_ENV)
+# OpenCV logs a warning on every start when OPENCV_IPP turns IPP off; its errors still raise. A default only.
+os.environ.setdefault("OPENCV_LOG_LEVEL", "ERROR")

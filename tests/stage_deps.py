@@ -16,20 +16,40 @@ PACKAGES = ("cvpipe", "stages")
 
 
 def module_file(name: str) -> Path | None:
-    """The file of a module of this repository (``cvpipe.io`` -> cvpipe/io.py), or None for third-party ones."""
+    """The file of a module of this repository (``cvpipe.io`` -> cvpipe/io.py; a compiled kernel's Cython source,
+    ``cvpipe.hough._vote`` -> cvpipe/hough/_vote.pyx, or its declarations, .pxd), or None for third-party ones."""
     if name.split(".")[0] not in PACKAGES:
         return None
     base = ROOT.joinpath(*name.split("."))
-    for cand in (base.with_suffix(".py"), base / "__init__.py"):
+    for cand in (base.with_suffix(".py"), base / "__init__.py", base.with_suffix(".pyx"), base.with_suffix(".pxd")):
         if cand.is_file():
             return cand
     return None
+
+
+#: ``from X cimport ...``, ``from X import ...``, ``cimport X`` and ``import X`` lines of a Cython source
+_CYTHON_IMPORT = re.compile(r"^\s*(?:from\s+(\.*[\w.]*)\s+c?import\b|c?import\s+([\w.]+))", re.M)
+
+
+def _cython_imports(path: Path, pkg: str) -> set[str]:
+    """The modules a .pyx/.pxd file imports or cimports (relative names resolved against ``pkg``)."""
+    found = set()
+    for rel, plain in _CYTHON_IMPORT.findall(path.read_text(encoding="utf-8")):
+        name = rel or plain
+        level = len(name) - len(name.lstrip("."))
+        if level:
+            parts = pkg.split(".")
+            name = ".".join(parts[: len(parts) - level + 1] + ([name.lstrip(".")] if name.lstrip(".") else []))
+        found.add(name)
+    return found
 
 
 def _imports(path: Path) -> set[str]:
     pkg = ".".join(path.relative_to(ROOT).with_suffix("").parts[:-1])
     if path.name == "__init__.py":
         pkg = ".".join(path.relative_to(ROOT).parts[:-1])
+    if path.suffix in (".pyx", ".pxd"):
+        return _cython_imports(path, pkg)
     found = set()
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
         if isinstance(node, ast.Import):
@@ -53,9 +73,10 @@ def closure(module: str) -> set[Path]:
         parts = name.split(".")
         for i in range(1, len(parts) + 1):
             f = module_file(".".join(parts[:i]))
-            if f is not None and f not in seen:
-                seen.add(f)
-                todo.extend(_imports(f))
+            for g in (f, f.with_suffix(".pxd") if f is not None and f.suffix == ".pyx" else None):
+                if g is not None and g.is_file() and g not in seen:  # a .pyx's own .pxd counts with it
+                    seen.add(g)
+                    todo.extend(_imports(g))
     return seen
 
 

@@ -2,9 +2,9 @@
 
 A second machine is emulated through the variables that select those paths (OpenCV's dispatched instruction sets and
 IPP code paths, numpy's loops, OpenBLAS's kernels): the stages pin them on start (``stages.PINNED_ENV``), so a feature stage and an estimate stage
-must write byte-identical outputs with and without the emulation. (numba's kernels are not emulated: compiled for
-another target CPU with ``NUMBA_CPU_NAME`` they gave the same bytes, see ``stages/__init__.py``.) Without the pin, OpenCV's
-SIFT on the emulated machine (no AVX2 dispatch) gives other keypoints, and this test fails.
+must write byte-identical outputs with and without the emulation. (cvpipe's own kernels are compiled for one fixed
+instruction set, see ``meson.build``.) Without the pin, OpenCV's SIFT on the emulated machine (no AVX2 dispatch)
+gives other keypoints, and this test fails.
 """
 
 from __future__ import annotations
@@ -75,3 +75,25 @@ def test_the_pinned_variables_reach_the_stage_before_the_libraries_load(tmp_path
         got = subprocess.run([sys.executable, "-c", f"import stages, os; print(os.environ[{key!r}])"], env=env,
                              capture_output=True, text=True, check=True).stdout.strip()
         assert got == value, key
+
+
+def test_a_stage_runs_opencv_without_ipp():
+    # IPP chooses its code per CPU (and takes other paths on non-Intel CPUs): with it, SIFT's bytes depend on the
+    # machine; the stages turn it off before OpenCV loads, whatever the environment asked for
+    code = "import stages, cv2; print(cv2.ipp.useIPP())"
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OPENCV_IPP": "AVX2"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"
+    plain = subprocess.run([sys.executable, "-c", "import cv2; print(cv2.ipp.useIPP())"], env=env,
+                           capture_output=True, text=True, check=True).stdout
+    assert plain.strip() == "True"  # the check above can fail: without the pin OpenCV uses IPP here
+
+
+def test_the_kernels_are_built_for_one_instruction_set_without_fast_math():
+    # the same bytes on every x86-64-v3 CPU: a fixed -march (never native), no contraction of a * b + c into an FMA
+    # (its rounding differs), no fast-math (reassociation, flush-to-zero)
+    build = (ROOT / "meson.build").read_text()
+    flags = build[build.index("arch_args = ["):].split("]", 1)[0]
+    assert "'-march=x86-64-v3'" in flags and "'-ffp-contract=off'" in flags
+    for banned in ("native", "fast-math", "Ofast", "funsafe-math", "fassociative-math"):
+        assert banned not in build, banned
