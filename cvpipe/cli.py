@@ -5,7 +5,7 @@ Subcommands live in ``cvpipe.commands.<name>`` (see that package's docstring). E
 
 Start-up is kept short: ``cvpipe --help`` and ``--version`` import no subcommand module (each one-line ``HELP`` is
 read from the module's source), and only the subcommand being run is imported and given its arguments. Command
-modules keep OpenCV, numba and the algorithm modules inside ``run()``, so ``cvpipe <cmd> --help`` stays light too.
+modules keep OpenCV and the algorithm modules inside ``run()``, so ``cvpipe <cmd> --help`` stays light too.
 """
 
 from __future__ import annotations
@@ -154,7 +154,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _interrupted(exc: BaseException) -> bool:
-    """True when ``exc`` is, or wraps, a KeyboardInterrupt (numba's parallel kernels re-raise Ctrl-C as SystemError)."""
+    """True when ``exc`` is, or wraps, a KeyboardInterrupt (also a SystemError naming it: what Python raises when an
+    extension returns a result with an exception set, such as a KeyboardInterrupt raised during its call)."""
     seen = set()
     while exc is not None and id(exc) not in seen:
         if isinstance(exc, KeyboardInterrupt):
@@ -260,7 +261,7 @@ def main(argv: list[str] | None = None) -> int:
 
     Exit status: 0 success, 1 no result (:class:`~cvpipe.errors.EstimationError`, an unexpected failure), 2 bad
     input or arguments (:class:`~cvpipe.errors.InputError`, a missing or unreadable file, out of memory), 130
-    interrupted (Ctrl-C, also inside numba's parallel kernels). ``CVPIPE_DEBUG=1`` re-raises for a traceback.
+    interrupted (Ctrl-C, also during a compiled extension's call). ``CVPIPE_DEBUG=1`` re-raises for a traceback.
     """
     args_list = sys.argv[1:] if argv is None else list(argv)
     json_mode = "--json" in args_list

@@ -4,7 +4,8 @@
 
 - ``""`` (the default): a plain loop in this process; Dask is not even imported.
 - ``"local"``: a ``distributed.LocalCluster`` of ``workers`` single-threaded worker processes (default: one per
-  core), with numba and OpenCV limited to one thread each so that the workers do not fight over the cores.
+  core), with OpenCV and our OpenMP kernels limited to one thread each so that the workers do not fight over the
+  cores.
 - ``"tcp://host:port"`` (port 1..65535): a running cluster, e.g. ``dask scheduler`` and ``dask worker``, or any
   other Dask deployment (Kubernetes, Slurm through dask-jobqueue). Before a client connects, the address is checked
   to greet like a Dask scheduler within ``timeout`` seconds (:func:`probe_scheduler`); a scheduler lost mid-run ends
@@ -38,8 +39,8 @@ from . import interrupt
 from .errors import EstimationError, InputError, check_int
 
 #: the worker environment of a ``local`` cluster: one thread per worker for every threaded library we use
-WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OPENCV_FOR_THREADS_NUM": "1", "OMP_NUM_THREADS": "1",
-              "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+WORKER_ENV = {"OPENCV_FOR_THREADS_NUM": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+              "OPENBLAS_NUM_THREADS": "1"}
 
 #: seconds to wait for a remote scheduler (the connection, its greeting and the client's registration) before giving
 #: up; the default of every ``timeout`` parameter of this module
@@ -74,7 +75,7 @@ class ItemResult:
         How many times the item was submitted (more than 1 only when a worker was lost under it).
     exception : BaseException or None
         The exception itself, in process only (None from a cluster, where only its message and class travel):
-        a caller can re-raise it with its chain (a Ctrl-C that numba wrapped) intact.
+        a caller can re-raise it with its chain (a Ctrl-C wrapped in a SystemError) intact.
     """
 
     index: int
@@ -105,9 +106,9 @@ def raise_unexpected(result: ItemResult) -> None:
     """Re-raise an item's failure that is not a cvpipe error (a bug, an interrupt): it ends the command, as it did
     before items were mapped, rather than becoming one listed item.
 
-    In process the original exception is raised (its chain intact, so a Ctrl-C wrapped by numba stays exit 130);
-    from a cluster, an :class:`InputError` for a ``ValueError`` and an :class:`EstimationError` otherwise, naming the
-    exception's class.
+    In process the original exception is raised (its chain intact, so a Ctrl-C wrapped in a SystemError stays exit
+    130); from a cluster, an :class:`InputError` for a ``ValueError`` and an :class:`EstimationError` otherwise,
+    naming the exception's class.
     """
     if result.ok or result.error_type in _cvpipe_classes():
         return
@@ -318,9 +319,9 @@ def cluster(scheduler: str, workers: int | None = None, *, timeout: float = CONN
     from distributed import Client, LocalCluster
 
     if s == "local":
-        # the nanny's `env` is set inside each worker process, before it imports numba; `pre-spawn-environ` would
-        # be written into this process's own os.environ too, and a later numba call here would then refuse to run
-        # ("Cannot set NUMBA_NUM_THREADS to a different value once the threads have been launched")
+        # the nanny's `env` is set inside each worker process, before it imports OpenCV or starts OpenMP;
+        # `pre-spawn-environ` would be written into this process's own os.environ too, and OpenCV or OpenMP started
+        # here later would then run this process's own work on one thread
         # no dashboard, and the scheduler's HTTP endpoints on a free port rather than 8787 (may be taken)
         local = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
                              silence_logs=logging.ERROR, dashboard_address=None, env=dict(WORKER_ENV),

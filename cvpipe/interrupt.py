@@ -5,15 +5,15 @@
 which raises ``KeyboardInterrupt`` there, in ordinary Python code, and the program ends with exit status 130 and one
 line (``cvpipe: error: interrupted``; with ``--json`` also the JSON record of a failure on stdout). A second SIGINT
 prints that line and leaves at once with ``os._exit(130)``: temporaries are cleaned by the next write, as after any
-killed process. A handler that never raises may run anywhere, also inside a Python callback of numba's compiled
-code, which must not fail.
+killed process. A handler that never raises may run anywhere, also inside a compiled extension's call back into
+Python, which must not fail.
 
 :func:`finish` decides a program's exit status: an interrupt that arrived during the work but was never checked
 turns it into 130. The handler stays in place through the interpreter's shutdown (its ``atexit`` functions,
-numba's and dask's threads): the last ``atexit`` function blocks SIGINT, and a Ctrl-C that arrived at any moment
-before it still ends the process with 130 and the one line. It then leaves with ``os._exit`` and the decided status
-(the standard streams flushed), so no SIGINT can arrive in a shutdown phase where Python has put back the default
-action, which would kill the process by the signal.
+dask's and the thread pools' threads): the last ``atexit`` function blocks SIGINT, and a Ctrl-C that arrived at any
+moment before it still ends the process with 130 and the one line. It then leaves with ``os._exit`` and the decided
+status (the standard streams flushed), so no SIGINT can arrive in a shutdown phase where Python has put back the
+default action, which would kill the process by the signal.
 
 :func:`results_out` marks that a command's results are going out: from then on an interrupt does not cut them
 short (only a second Ctrl-C does, at once) and no record follows them on stdout; the first one still ends the

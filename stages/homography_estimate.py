@@ -20,7 +20,8 @@ def homography_estimate(st: Stage) -> None:
     first = True
     for name, (fit, seconds) in st.map(estimate_item, pairs, shared=(a.method, p), desc=f"estimate {a.method}",
                                        names=[f.stem for f in files]):
-        key = "first_call" if first and not st.dropped else "estimates"  # numba cache load first
+        # the process's first call warms OpenCV and the first allocations: timed apart from the others
+        key = "first_call" if first and not st.dropped else "estimates"
         st.timings[key] = st.timings.get(key, 0.0) + seconds
         first = False
         io.save_npz(out / f"{name}.npz", H=fit.H, inliers=fit.inliers)

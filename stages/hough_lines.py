@@ -14,7 +14,7 @@ def hough_lines(st: Stage) -> None:
     for name, (lines, first, median) in st.map(hough.lines_item, (io.read_image(f, "gray") for f in files),
                                                shared=(method, p), desc=f"hough lines {method}",
                                                names=[f.name for f in files]):
-        key = "first_call" if not images else "calls"  # ours' first: numba compile or cache load
+        key = "first_call" if not images else "calls"  # the process's first: warms OpenCV and the allocations
         st.timings[key] = st.timings.get(key, 0.0) + first
         st.timings[f"median.{Path(name).stem}"] = median
         images.append({"file": name, "lines": lines.tolist()})

@@ -33,7 +33,6 @@ def run_env() -> dict[str, str]:
     """Environment in which `python` and `dvc` are this interpreter's (the venv under test)."""
     env = dict(os.environ)
     env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
-    env.setdefault("NUMBA_CACHE_DIR", str(Path(__file__).resolve().parents[1] / ".numba_cache"))
     env["DVC_NO_ANALYTICS"] = "1"
     return env
 

@@ -1,10 +1,12 @@
 """`cvpipe bench guard`'s decision: every row is compared with its committed limit, and a row over it (or without
-one) fails the run with its name. The measurements themselves are the guard's job, never asserted here."""
+one) fails the run with its name. The measurements themselves are the guard's job, never asserted here; how a row
+reads a command's own step line (the stitch start-up) is."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 import pytest
 
@@ -82,3 +84,25 @@ def test_bad_arguments_are_refused(tmp_path, fake_group):
         guard.run(_args(tmp_path, "a 1 why\n", rows=["nope"]))
     with pytest.raises(InputError, match="no bundled samples"):
         guard.run(_args(tmp_path, "a 1 why\n", samples=str(tmp_path / "missing")))
+
+
+def test_the_stitch_step_line_is_the_one_the_commands_log(capsys):
+    from cvpipe.commands import configure_output, step
+
+    configure_output(verbose=1)
+    try:
+        with step("stitch 3 images"):
+            pass
+    finally:
+        configure_output()
+    lines = capsys.readouterr().err.splitlines()
+    assert any(guard._STITCH_STEP.match(line) for line in lines), lines
+
+
+def test_time_before_a_step_is_read_from_its_line_and_a_missing_line_fails():
+    say = "import sys; print('cvpipe: stitch 2 images: 0.000 s', file=sys.stderr)"
+    assert 0 < guard._before_step([sys.executable, "-c", say], guard._STITCH_STEP, 1) < 60
+    with pytest.raises(InputError, match="no line of the step"):
+        guard._before_step([sys.executable, "-c", "pass"], guard._STITCH_STEP, 1)
+    with pytest.raises(InputError, match="exit 3"):
+        guard._before_step([sys.executable, "-c", say + "; sys.exit(3)"], guard._STITCH_STEP, 1)

@@ -213,7 +213,7 @@ def test_81_megapixel_stitch_peaks_under_the_memory_budget(tmp_path):
     assert proc.returncode == 0, proc.stderr[-500:]
     assert "memory budget" in proc.stderr  # composed at a reduced size, and said so
     peak = int(proc.stderr.rsplit("peak_rss_kib", 1)[1].split()[0]) * 1024
-    # the whole process (interpreter, numba, OpenCV, the decoded 81 MP inputs and the blend) stays within the budget
+    # the whole process (interpreter, OpenCV, the decoded 81 MP inputs and the blend) stays within the budget
     # it was given; measured 3.50 GB
     assert peak < budget_gb * 1e9, peak / 1e9
     pano = cv2.imread(str(tmp_path / "pano.png"))

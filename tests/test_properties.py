@@ -2,7 +2,7 @@
 
 Whatever the points (NaN/inf, duplicates, collinear, too few, tiny or huge coordinates) or the bytes of an "image"
 file, the result is either a valid answer or an exception from :mod:`cvpipe.errors` with a message: never a
-numpy, OpenCV, numba or ZeroDivision error from deep inside.
+numpy, OpenCV or ZeroDivision error from deep inside.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from hypothesis.extra import numpy as hnp
 from cvpipe import homography, io
 from cvpipe.errors import CvpipeError
 
-#: modest example counts and no deadline: the first call of a numba kernel loads it from the cache
+#: modest example counts and no deadline: the first example of a test pays for OpenCV's and numpy's first use
 FAST = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 _any_float = st.floats(allow_nan=True, allow_infinity=True, width=64)

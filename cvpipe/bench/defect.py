@@ -21,7 +21,7 @@ from ..errors import CvpipeError, InputError
 from ..params import InspectParams, replace
 
 if typing.TYPE_CHECKING:  # annotations only: the modules are imported inside the functions that use them,
-    # so that `cvpipe bench defect --help` imports neither numpy nor cv2 nor numba
+    # so that `cvpipe bench defect --help` imports neither numpy nor cv2
     import numpy as np
 
 

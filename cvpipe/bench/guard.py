@@ -4,7 +4,8 @@ Each row times one of our parts against its OpenCV counterpart on the same input
 best of ``--repeats`` calls on both sides, interleaved so that load from elsewhere hits both alike) and prints the
 time ratio ours / OpenCV beside an accuracy figure of both, so that a row cannot get faster by getting worse. Rows
 over a set of items report the worst item (``max``) or the median, as the limit's line says. A few rows are whole
-processes or absolute times (start-up, a warm command, the defect inspection per probe).
+processes or absolute times (start-up, a warm command, the time a command takes before its work starts, the
+defect inspection per probe).
 
 The limits live in ``guard_limits.txt`` beside this module, one line per row: the row, its limit, and why. The
 command exits 1 naming every row over its limit. Rows on the real data sets run when ``--data`` (default
@@ -15,7 +16,9 @@ command exits 1 naming every row over its limit. Rows on the real data sets run 
 from __future__ import annotations
 
 import argparse
+import collections
 import os
+import re
 import statistics
 import subprocess
 import sys
@@ -247,8 +250,8 @@ def row_sgm(ctx: dict) -> list[Row]:
 
     bad, timed = [], []
     pairs = _stereo_pairs(ctx)
-    # every pair is run once before any is timed: numba compiles the kernels on the first call (about 20 s when its
-    # cache is cold), and the first calls after that were measured up to 1.4x slower on the smallest pair
+    # every pair is run once before any is timed: the first calls of the process (OpenMP's and OpenCV's threads
+    # starting, the first allocations of each size) are slower than the rest
     for name, (left, right, truth) in ctx["progress"](list(pairs.items()), "guard sgm"):
         nd = disparity_range(truth)
         cfg, disp_cv = _best_sgbm(left, right, nd, truth)
@@ -260,7 +263,7 @@ def row_sgm(ctx: dict) -> list[Row]:
                      "opencv": lambda: stereo.disparity_opencv_sgbm(left, right, nd, **cfg)}, calls, warm_up)
         return t["ours"] / t["opencv"]
 
-    # ours runs on numba's threads, whose start varies (and tsukuba takes 5 ms in SGBM): more calls for a stable best
+    # ours runs on OpenMP's threads, whose start varies (and tsukuba takes 5 ms in SGBM): more calls for a stable best
     ratios = [ratio(*args, ctx["repeats"] + 6) for args in timed]
     # the worst of six best-of-9 ratios read 1.47-2.35x in six runs on an idle machine (one unlucky series of calls
     # decides it): the two worst pairs are measured again with 31 calls a side, and that estimate is kept, as the
@@ -393,13 +396,56 @@ def row_stitch_command(ctx: dict) -> list[Row]:
                 "`cvpipe stitch` / a cv2.Stitcher Python command, wall, worst set", "as stitch_max", len(ratios))]
 
 
+#: the line that ``cvpipe -v stitch`` logs on stderr when its stitch step ends (:func:`cvpipe.commands.step`)
+_STITCH_STEP = re.compile(r"^cvpipe: stitch \d+ images: (?P<seconds>[0-9.]+) s$")
+
+
+def _before_step(cmd: list[str], step: re.Pattern, repeats: int) -> float:
+    """Best, over ``repeats`` runs after one warm-up run, of the seconds that the command ``cmd`` (run with ``-v``)
+    spends before the step whose log line matches ``step``.
+
+    Measured from the outside: from just before the process is started to the arrival of the step's line on its
+    stderr, less the step's own seconds that the line gives (its group ``seconds``, to the millisecond). The line is
+    read as it comes (Python's stderr is line-buffered, and the log handler flushes each record), so what it adds is
+    the pipe's latency, microseconds.
+    """
+    best = float("inf")
+    for k in range(repeats + 1):
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        before, tail = None, collections.deque(maxlen=5)
+        for line in proc.stderr:
+            found = step.match(line.rstrip("\n"))
+            if found is not None and before is None:
+                before = time.perf_counter() - t0 - float(found["seconds"])
+            tail.append(line)
+        if proc.wait() != 0 or before is None:
+            why = f"exit {proc.returncode}" if proc.returncode else "no line of the step"
+            raise InputError(f"`{' '.join(cmd[:5])} ...`: {why}: {''.join(tail).strip()[-300:]}")
+        if k:
+            best = min(best, before)
+    return best
+
+
 def row_startup(ctx: dict) -> list[Row]:
-    """Wall time of ``cvpipe --version`` and of a warm ``cvpipe hough`` on a sample image, best of the repeats."""
+    """Wall time of ``cvpipe --version`` and of a warm ``cvpipe hough`` on a sample image, best of the repeats; and
+    the seconds that ``cvpipe stitch`` spends before stitching (process start, imports, reading the photos) on each
+    of the samples' panorama sets, best of the repeats: the worst set."""
     image = _images(ctx["samples"] / "hough")[0]
     version = _wall([*_cvpipe(), "--version"], ctx["repeats"])
-    hough = _wall([*_cvpipe(), "hough", str(image), "--json"], max(2, ctx["repeats"] // 2))
+    hough = _wall([*_cvpipe(), "hough", str(image), "--json"], ctx["repeats"] + 2)
+    startup = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        sets = _panorama_sets({**ctx, "data": None})  # the samples' sets only: the row is the same with --data
+        for name, paths in ctx["progress"](list(sets.items()), "guard stitch start-up"):
+            cmd = [*_cvpipe(), "-v", "stitch", *map(str, paths), "-o", str(Path(tmp) / "pano.png")]
+            startup[name] = _before_step(cmd, _STITCH_STEP, ctx["repeats"] + 2)
+    worst = max(startup, key=startup.__getitem__)
     return [Row("version_s", version, "s", "`cvpipe --version` wall", "-", 1),
-            Row("hough_command_s", hough, "s", f"warm `cvpipe hough {image.name} --json` wall", "-", 1)]
+            Row("hough_command_s", hough, "s", f"warm `cvpipe hough {image.name} --json` wall", "-", 1),
+            Row("stitch_startup_s", startup[worst], "s",
+                f"`cvpipe stitch` before stitching (start, imports, reading), worst samples set ({worst})", "-",
+                len(startup), {"seconds_per_set": startup})]
 
 
 def row_defect(ctx: dict) -> list[Row]:
@@ -470,11 +516,11 @@ def _cpu_model() -> str:
 
 def _versions() -> dict[str, str]:
     """The versions that the ratios depend on: OpenCV's (the baseline: 5.1's HoughLines is about 40 % faster than
-    5.0's), numba's and numpy's."""
+    5.0's) and numpy's. cvpipe's own kernels are compiled ahead of time with fixed flags (meson.build)."""
     from importlib.metadata import PackageNotFoundError, version
 
     out = {}
-    for name in ("opencv-contrib-python-headless", "numba", "numpy"):
+    for name in ("opencv-contrib-python-headless", "numpy"):
         try:
             out[name] = version(name)
         except PackageNotFoundError:

@@ -22,7 +22,7 @@ from ..params import Detector, FeaturesParams, HomographyEstimateParams, MatchPa
 DETECTORS = typing.get_args(Detector)
 
 if typing.TYPE_CHECKING:  # annotations only: the modules are imported inside the functions that use them,
-    # so that `cvpipe bench homography --help` imports neither numpy nor cv2 nor numba
+    # so that `cvpipe bench homography --help` imports neither numpy nor cv2
     import numpy as np
 
 
@@ -166,7 +166,8 @@ def _run_all(src, dst, repeats: int, H_true, size, vpts=None, **kw) -> dict:
 
 
 def _warm_up(kw: dict) -> float:
-    """Run every method once (numba compile or cache load, OpenCV initialisation); returns ours' first-call time."""
+    """Run every method once (the first call of each in this process: OpenCV's initialisation, first allocations);
+    returns ours' first-call time."""
     import numpy as np
     from ..homography import METHODS, estimate
 
@@ -314,7 +315,7 @@ def markdown(result: dict) -> str:
                          + " | ".join(_f(r["methods"][m]["time_ms"]) for m in METHODS)
                          + f" | {r['ratio_ours_magsac_wall']:.2f} | {r['ratio_ours_magsac_cpu']:.2f} |")
     if "first_call_s" in result:
-        lines += ["", f"First call of ours in this process (numba compile or cache load): {result['first_call_s']:.2f} s"
+        lines += ["", f"First call of ours in this process: {result['first_call_s']:.2f} s"
                       " (not included above)."]
     return "\n".join(lines)
 

@@ -31,7 +31,7 @@ from ..errors import InputError
 from ..params import DEFAULT_EXTRA_SCORE, Detector, LogoFeaturesParams, LogoMatchParams, LogoVerifyParams, load_section
 
 if typing.TYPE_CHECKING:  # annotations only: the modules are imported inside the functions that use them,
-    # so that `cvpipe bench logo --help` imports neither numpy nor cv2 nor numba
+    # so that `cvpipe bench logo --help` imports neither numpy nor cv2
     import numpy as np
 
     from .. import logo

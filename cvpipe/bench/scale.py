@@ -7,7 +7,7 @@ with new warps. Probes are made lazily in the stage process and travel to the wo
 their keypoints are scattered once per worker.
 
 Every configuration runs in a fresh interpreter, so that its peak memory (``ru_maxrss``) is its own: serial in
-process (numba and OpenCV with their own threads), ``LocalCluster`` with 1 and with 2 single-threaded workers, and an
+process (OpenMP and OpenCV with their own threads), ``LocalCluster`` with 1 and with 2 single-threaded workers, and an
 external ``dask scheduler`` with 2 ``dask worker --nthreads 1`` processes on 127.0.0.1, and ``kill2``: its own
 external cluster of 2 workers of which one is killed (SIGKILL) when half of the probes are done, so that the time a
 lost worker costs shows against ``external2`` (the rates before and after the kill, and the whole run's time).
@@ -36,7 +36,7 @@ from pathlib import Path
 from ..errors import InputError
 
 if typing.TYPE_CHECKING:  # annotations only: the modules are imported inside the functions that use them,
-    # so that `cvpipe bench scale --help` imports neither numpy nor cv2 nor numba
+    # so that `cvpipe bench scale --help` imports neither numpy nor cv2
     import numpy as np
 
     from .. import defect as defects
@@ -223,7 +223,8 @@ def measure(mode: str, n: int, data: str, seed: int, address: str = "", overhead
     out = {"mode": mode, "probes": n}
     with ctx as client:
         out["startup_s"] = time.perf_counter() - t0
-        # warm-up: lazy initialisation (numba cache load, OpenCV's pools) on every worker is not throughput
+        # warm-up: lazy initialisation (first imports, OpenCV's and OpenMP's thread pools) on every worker is not
+        # throughput
         warm = list(stream(pairs, templates, tests, 2, seed + 1))
         list(map_items(inspect_item, warm, shared=refs, client=client) if client else
              map_items(inspect_item, warm, shared=refs))

@@ -10,7 +10,7 @@ mean absolute error over the pixels that have an estimate, and density (share of
 OpenCV SGBM is run in each of its four modes with block sizes 3, 5 and 7 (same range), and the configuration with
 the lowest bad-2.0 on that pair is the baseline ("best of SGBM's modes"). Time: median over ``--repeats`` calls,
 the methods interleaved in this process after a warm-up call, so that load from other processes hits them alike.
-The one-off numba compile time is measured separately in a fresh interpreter with an empty cache.
+The first call of ours in the process is timed on its own.
 
 With ``--rectify`` the benchmark is the rectification one instead (``cvpipe.bench.stereo_rectify``).
 """
@@ -23,13 +23,12 @@ import time
 import typing
 from pathlib import Path
 
-from . import fresh_cache_output
 from ..errors import InputError
 from ..params import StereoBmParams, StereoSgmParams
 from .stereo_pairs import MIDDLEBURY, disparity_range, load_pairs  # noqa: F401 - the pairs of both benchmarks
 
 if typing.TYPE_CHECKING:  # annotations only: the modules are imported inside the functions that use them,
-    # so that `cvpipe bench stereo --help` imports neither numpy nor cv2 nor numba
+    # so that `cvpipe bench stereo --help` imports neither numpy nor cv2
     import numpy as np
 
 
@@ -39,26 +38,11 @@ EXAMPLE = "cvpipe bench stereo --data ../shared/data --json"
 #: the OpenCV SGBM configurations searched for the best baseline per pair
 SGBM_BLOCK_SIZES = (3, 5, 7)
 
-_COMPILE_SNIPPET = """
-import time, numpy as np
-t0 = time.perf_counter()
-from cvpipe import stereo
-t1 = time.perf_counter()
-rng = np.random.default_rng(0)
-left = rng.integers(0, 256, (40, 64), dtype=np.uint8)
-right = np.roll(left, -3, axis=1)
-stereo.disparity_sgm(left, right, 16); stereo.disparity_sgm(left, right, 16, paths=4, fill=True)
-stereo.disparity_sgm(np.dstack([left] * 3), np.dstack([right] * 3), 16)
-t2 = time.perf_counter()
-print(t2 - t1, t1 - t0)
-"""
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--data", default=os.environ.get("CVPIPE_DATA"),
                         help="data root holding middlebury_stereo/ (default: $CVPIPE_DATA)")
     parser.add_argument("--repeats", type=int, default=5, help="timed calls per pair and method (median)")
-    parser.add_argument("--no-compile", action="store_true", help="skip the fresh-cache compile measurement")
     parser.add_argument("--rectify", action="store_true",
                         help="instead: unrectify each pair by a seeded random rotation/shift/scale of the right "
                              "view and compare our uncalibrated rectification with OpenCV's "
@@ -67,12 +51,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seeds", type=int, default=1,
                         help="with --rectify: repeat the protocol with the unrectifying seeds SEED .. SEED+N-1")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
-
-
-def _compile_seconds() -> dict:
-    """Compile time of the numba kernels in a fresh interpreter with an empty cache."""
-    out = fresh_cache_output(_COMPILE_SNIPPET)
-    return {"compile_s": float(out[0]), "import_s": float(out[1])}
 
 
 def _timed(fn) -> tuple[float, float]:
@@ -100,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     import cv2
     import numpy as np
     from tqdm import tqdm
-    from .. import io, stereo
+    from .. import _threads, io, stereo
 
     if not args.data:
         raise InputError("no data root: pass --data DIR or set CVPIPE_DATA")
@@ -111,7 +89,6 @@ def run(args: argparse.Namespace) -> int:
     if args.repeats < 1:
         raise InputError(f"`--repeats` must be >= 1, got {args.repeats}")
     pairs = load_pairs(Path(args.data))
-    compile_info = {} if args.no_compile else _compile_seconds()
     probe = pairs["tsukuba"][0]
     first_call = _timed(lambda: stereo.disparity_sgm(probe, pairs["tsukuba"][1], 16))[0]
 
@@ -150,9 +127,9 @@ def run(args: argparse.Namespace) -> int:
     fill_b2, sgbm_fill_b2 = by("sgm_fill", "bad_2.0"), by("opencv_sgbm_fill", "bad_2.0")
     ratios = list(by("sgm", "time_ratio_to_sgbm").values())
     summary = {
-        "pairs": list(pairs), "repeats": args.repeats, "threads": {"numba": _numba_threads(), "opencv":
+        "pairs": list(pairs), "repeats": args.repeats, "threads": {"openmp": _threads.max_threads(), "opencv":
                                                                    cv2.getNumThreads()},
-        "sgbm_choice": sgbm_choice, "first_call_s": first_call, **compile_info,
+        "sgbm_choice": sgbm_choice, "first_call_s": first_call,
         "sgm_bad2_not_worse_than_sgbm": {p: bool(sgm_b2[p] <= sgbm_b2[p]) for p in sgm_b2},
         "sgm_fill_bad2_not_worse_than_sgbm_fill": {p: bool(fill_b2[p] <= sgbm_fill_b2[p]) for p in fill_b2},
         "sgm_time_ratio_median": float(np.median(ratios)), "sgm_time_ratio_max": float(np.max(ratios)),
@@ -181,12 +158,6 @@ def run(args: argparse.Namespace) -> int:
           f"(4 paths: median {summary['sgm_4path_time_ratio_median']:.2f}); "
           f"CPU time ratio median {summary['sgm_cpu_ratio_median']:.2f}; "
           f"load average {summary['load_average_1min']:.1f}")
-    print(f"first call (numba cache load or compile) {first_call:.2f} s"
-          + (f"; compile with an empty cache {compile_info['compile_s']:.1f} s" if compile_info else ""))
+    print(f"first call of ours in this process {first_call:.2f} s; threads: OpenMP {summary['threads']['openmp']}, "
+          f"OpenCV {summary['threads']['opencv']}")
     return 0
-
-
-def _numba_threads() -> int:
-    import numba
-
-    return int(numba.get_num_threads())

@@ -177,7 +177,7 @@ def run_rectify(args: argparse.Namespace, pairs: dict) -> int:
         t0 = time.perf_counter()
         p1, p2 = correspondences(io.to_gray(left), io.to_gray(right_u))
         t_match = time.perf_counter() - t0
-        if warm is None:  # the first call loads the numba kernels of the homography check
+        if warm is None:  # the first call of the process, timed apart: it warms OpenCV and the allocations
             t0 = time.perf_counter()
             rectify.rectify_uncalibrated(p1, p2, (w, h), threshold=THRESHOLD, rng=0)
             warm = time.perf_counter() - t0
