@@ -3,7 +3,7 @@
 Each module defines ``HELP`` (one line), ``EXAMPLE`` (one command line that runs on the bundled samples),
 ``add_arguments(parser)`` and ``run(args) -> int``. ``cvpipe.cli`` lists them in ``COMMANDS``; a module that is
 absent is simply not offered. ``HELP`` and ``EXAMPLE`` are plain string literals (``cvpipe --help`` reads them from
-the source), and module level imports stay light: OpenCV, numba and the algorithm modules are imported inside
+the source), and module level imports stay light: OpenCV, numpy and the algorithm modules are imported inside
 ``run()``, so that ``cvpipe <cmd> --help`` answers at once.
 """
 
@@ -141,13 +141,9 @@ def add_result_arguments(parser, overlay: str, json: str, items: str | None = No
                                  "(default: in process)")
 
 
-def read_images(paths: Iterable[str], mode: str, named: bool = False, first_read=None) -> Iterator[tuple]:
+def read_images(paths: Iterable[str], mode: str, named: bool = False) -> Iterator[tuple]:
     """``(image or None, read error or None)`` per path (``(path, image, error)`` when ``named``), lazily: the
-    image travels with its task and a read error fails only its own item.
-
-    ``first_read`` is called once, just before the first image that could be read is yielded: a note about work to
-    come (numba compiling) is not printed when every input is bad, and never before the error of a bad input.
-    """
+    image travels with its task and a read error fails only its own item."""
     from .. import io
     from ..errors import CvpipeError
 
@@ -156,9 +152,6 @@ def read_images(paths: Iterable[str], mode: str, named: bool = False, first_read
             item: tuple = (io.read_image(path, mode), None)
         except CvpipeError as exc:
             item = (None, exc)
-        if item[1] is None and first_read is not None:
-            first_read, announce = None, first_read
-            announce()
         yield (path, *item) if named else item
 
 
