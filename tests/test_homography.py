@@ -18,8 +18,8 @@ from cvpipe.homography import (
     hartley_normalization,
     transform_points,
 )
-from cvpipe.homography._kernels import _null_vector
-from cvpipe.homography._ransac_kernels import _minimal_solve
+from cvpipe.homography._dlt import null_vector as _null_vector
+from cvpipe.homography._ransac import minimal_solve as _minimal_solve
 from cvpipe.metrics import corner_error, image_corners
 
 W, H_IMG = 640, 480

@@ -82,17 +82,17 @@ def test_sprt_updates_follow_the_models_seen():
     n, log1mconf = 1000, math.log1p(-0.99)
     s = robust.new_state(10_000, 0.05, 0.01, 200.0)
     # a new best with 300 raw inliers of 1000: the good model's share becomes 0.3, the bound follows 300 inliers
-    on_new_best(s[0], 5.0, 320, 300, n, 4, log1mconf, 10_000)
+    on_new_best(s, 5.0, 320, 300, n, 4, log1mconf, 10_000)
     assert s["sprt_eps"][0] == 0.3 and s["best_inliers"][0] == 320 and s["best_cost"][0] == 5.0
     assert s["bound"][0] == robust.iterations_needed(320, n, 4, log1mconf, 10_000, s["sprt_a"][0])
     # 20 rejected models with 10 % consistent points: delta is re-estimated and the test redesigned
     for _ in range(20):
-        on_rejected(s[0], 5, 50, n, 4, log1mconf, 10_000)
+        on_rejected(s, 5, 50, n, 4, log1mconf, 10_000)
     assert s["bad_models"][0] == 20 and s["sprt_delta"][0] == pytest.approx(0.1)
     assert s["sprt_a"][0] == robust.sprt_threshold(0.3, 0.1, 200.0)
     # without an SPRT (the default state) a new best leaves it off
     t = robust.new_state(10_000)
-    on_new_best(t[0], 1.0, 500, 500, n, 7, log1mconf, 10_000)
+    on_new_best(t, 1.0, 500, 500, n, 7, log1mconf, 10_000)
     assert t["sprt_a"][0] == np.inf and t["sprt_eps"][0] == 0.0
 
 

@@ -18,15 +18,16 @@ boolean inlier mask. The pipeline is
    inlier threshold shrinking from ``lo_multiplier * threshold`` to ``threshold``;
 5. a final iteratively reweighted Levenberg-Marquardt refinement of the reprojection error (Tukey weights).
 
-The per-hypothesis loop, scoring and refinement are numba kernels (``cache=True``; the first call with a fresh
-``NUMBA_CACHE_DIR`` compiles them, about 30 s of CPU once; later processes load them in about a second). Random numbers come from a ``numpy.random.Generator`` in chunks, so
-a seeded ``rng`` reproduces a result exactly.
+The per-hypothesis loop, scoring and refinement are compiled Cython kernels (built with the package). Random
+numbers come from a ``numpy.random.Generator`` in chunks, so a seeded ``rng`` reproduces a result exactly.
 
 Modules: :mod:`~cvpipe.homography.estimate` (``find_homography``, ``estimate``, ``estimate_with`` for the
 ``homography.estimate`` section, the OpenCV methods, the test against
 chance), :mod:`~cvpipe.homography.dlt`, :mod:`~cvpipe.homography.match` (``correspondences``),
-:mod:`~cvpipe.homography.report` (pictures, metrics, summary), and the numba kernels in ``_kernels`` /
-``_ransac_kernels``. The sampling, the state of the run, the bound, the SPRT, the driver and the NFA are the robust
+:mod:`~cvpipe.homography.report` (pictures, metrics, summary), and the compiled kernels: ``_ransac`` (4-point solver,
+local optimization, the per-hypothesis loop), ``_dlt`` (normalization, errors, the final refinement), ``_chance``
+(the counts of the test against chance), over the inline model of ``_model.pxd`` and the eigen-solver of
+``_eigen.pxd``. The sampling, the state of the run, the bound, the SPRT, the driver and the NFA are the robust
 core's (:mod:`cvpipe.robust`): this package holds the homography's own parts (4-point solver, residual, refits).
 """
 

@@ -6,8 +6,11 @@ import numpy as np
 
 from ..errors import EstimationError, InputError
 from ..geometry import apply_homography, as_points, collinear, hartley_normalization
-from ._kernels import _ALL_COLLINEAR_EPS, _denormalize
+from ._dlt import denormalize
 
+#: relative size of the smaller principal axis below which a whole point set counts as collinear (1e-7: the
+#: 2x2 covariance resolves eigenvalue ratios down to ~1e-15, i.e. axis ratios down to ~3e-8)
+_ALL_COLLINEAR_EPS = 1e-7
 #: map points through a homography (the name this package has always exported)
 transform_points = apply_homography
 
@@ -109,5 +112,5 @@ def dlt(src, dst, weights=None) -> np.ndarray:
     if sv[7] <= 1e-12 * sv[0]:
         raise EstimationError("the DLT system is rank-deficient (degenerate configuration); supply more spread points")
     H = np.empty((3, 3))
-    _denormalize(np.ascontiguousarray(vt[-1].reshape(3, 3)), Ts, np.linalg.inv(Td), np.empty((3, 3)), H)
+    denormalize(np.ascontiguousarray(vt[-1].reshape(3, 3)), Ts, np.linalg.inv(Td), H)
     return _unit_h22(H)

@@ -13,11 +13,12 @@ import numpy as np
 from ..errors import EstimationError, InputError, check_int
 from ..geometry import as_points
 from ..params import HomographyEstimateParams, section_or_default
-from ._kernels import (_bounding_box, _chance_hits, _densest_cell, _distinct_rows, _finalize, _normalize, _rows_in_order,
-                       _sq_errors)
 from ..robust import log10_nfa, new_state, run
-from ._ransac_kernels import _collapsed, _ransac_chunk
-from .dlt import _check_pair, _unit_h22
+from ._chance import bounding_box as _bounding_box, chance_hits as _chance_hits, densest_cell as _densest_cell
+from ._chance import distinct_rows as _distinct_rows
+from ._dlt import finalize as _finalize, normalize, sq_errors as _sq_errors
+from ._ransac import collapsed as _collapsed, ransac_chunk as _ransac_chunk, rows_in_order as _rows_in_order
+from .dlt import _ALL_COLLINEAR_EPS, _check_pair, _unit_h22
 
 #: the ``homography.estimate`` defaults: the one declaration of the keyword defaults of the estimators here
 _EST = HomographyEstimateParams()
@@ -28,7 +29,7 @@ _SPRT_EPS0 = 0.05
 _SPRT_DELTA0 = 0.01
 #: the SPRT's time of one hypothesis (sample, checks, solve) in units of one point verification
 _SPRT_TM = 200.0
-#: final refinement: IRLS rounds and the cut-off of its Tukey weights (see ``_weights``) relative to the threshold. The threshold bounds the noise of an inlier, but real matches (SIFT under viewpoint change) have
+#: final refinement: IRLS rounds and the cut-off of its Tukey weights (see ``_dlt.finalize``) relative to the threshold. The threshold bounds the noise of an inlier, but real matches (SIFT under viewpoint change) have
 #: heavier tails: a smooth redescending weight over 3x the threshold (weight 0.79 at the threshold, 0.31 at twice
 #: it) gave lower corner errors on the Oxford/CMP pairs than hard inliers (see docs/notes/homography.md), like
 #: MAGSAC++'s marginalisation over the noise scale; the returned inlier mask still uses the threshold itself.
@@ -149,7 +150,7 @@ def _significant(fit: HomographyFit, src: np.ndarray, dst: np.ndarray, threshold
 def _nfa_test(fit: HomographyFit, src: np.ndarray, dst: np.ndarray, threshold: float,
               area: float | None) -> HomographyFit:
     """:func:`check_significant` of validated (N, 2) float64 points."""
-    inl = np.asarray(fit.inliers, bool)
+    inl = np.ascontiguousarray(fit.inliers, bool)
     # evidence counts distinct points: many matches to one keypoint (or SIFT's copies of a keypoint with several
     # orientations) are one observation, and a model that squeezes a row of sources onto one point gains nothing
     n_src, k_src = _distinct_rows(src, inl)
@@ -285,8 +286,8 @@ def find_homography(
     gen = np.random.default_rng(rng)
     n = len(s)
     thr2 = float(threshold) ** 2
-    Ts, sn, ok_s = _normalize(s)
-    Td, dn, ok_d = _normalize(d)
+    Ts, sn, ok_s = normalize(s, _ALL_COLLINEAR_EPS)
+    Td, dn, ok_d = normalize(d, _ALL_COLLINEAR_EPS)
     for name, ok in (("src", ok_s), ("dst", ok_d)):
         if not ok:
             raise EstimationError(
@@ -300,11 +301,11 @@ def find_homography(
     log1mconf = math.log1p(-float(confidence))
     # the SPRT assumes the points are verified in random order; the caller's order may be sorted by quality
     perm = gen.permutation(n)
-    sp, dp, snp, dnp = _rows_in_order(perm, s, d, sn, dn)
+    pts = _rows_in_order(perm, s, d, sn, dn)  # (4, n, 2): src, dst, normalized src, normalized dst
+    lo, lo_mult, lo_n, max_it = bool(local_optimization), float(lo_multiplier), int(lo_steps), int(max_iters)
 
     def step(u):
-        return _ransac_chunk(sp, dp, snp, dnp, Ts, Tdi, Tsi, Td, u, thr2, log1mconf, int(max_iters),
-                             bool(local_optimization), float(lo_multiplier), int(lo_steps), best_H, state)
+        return _ransac_chunk(pts, Ts, Tdi, Tsi, Td, u, thr2, log1mconf, max_it, lo, lo_mult, lo_n, best_H, state)
 
     run(step, gen, 4, state, max_iters=int(max_iters), first_chunk=256, largest_chunk=8192)
     iterations = int(state["iterations"][0])

@@ -15,9 +15,9 @@ A robust estimator here is a *recipe*: a model (its minimal solver, its residual
 
 The recipes: :func:`cvpipe.homography.find_homography` (4-point samples, SPRT, local optimization),
 :func:`cvpipe.stereo.find_fundamental` (7-point samples in batches) and :func:`cvpipe.logo.affine_ransac`
-(3-point samples scored all at once). The kernels are numba functions (``cache=True``) that the recipes' kernels
-call; numba cannot cache a function that takes another function as an argument, so each recipe writes its short
-per-hypothesis loop itself, out of these steps.
+(3-point samples scored all at once). The steps are inline C in ``_core.pxd`` (the ``State`` struct, the samplers,
+the stopping rules) that the recipes' compiled kernels cimport, and ``_search`` exposes to Python; each recipe writes
+its short per-hypothesis loop itself, out of these steps, so that its own solver and residual inline into it.
 """
 
 from .loop import run

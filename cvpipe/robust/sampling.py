@@ -4,67 +4,63 @@ The j-th index of a sample is uniform over the ``n - j`` values not chosen yet: 
 j-th uniform and walked past the indices already chosen, in increasing order. :func:`sample_distinct` does this for
 any sample size; :func:`sample4` is the same draw for 4 indices in scalar, branch-light code, for the homography's
 loop of tens of thousands of hypotheses (figures: docs/notes/robust.md); both give the same indices from the same
-uniforms.
+uniforms. They are compiled (``_core.pxd``, which the recipes' kernels cimport; ``_search`` for Python callers).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from ..errors import InputError
+from . import _search
 
 
-@njit(cache=True, error_model="numpy")
-def sample_distinct(u, row, n, pick, chosen):  # pragma: no cover - compiled
+def _uniforms(u) -> np.ndarray:
+    u = np.ascontiguousarray(u, dtype=np.float64)
+    if u.ndim != 2:
+        raise InputError(f"the uniforms must be a (rows, sample size) array, got shape {u.shape}")
+    return u
+
+
+def sample_distinct(u, row: int, n: int, pick: np.ndarray, chosen: np.ndarray) -> None:
     """``len(pick)`` distinct indices in [0, n) into ``pick`` from as many uniforms ``u[row]`` in [0, 1).
 
-    ``chosen`` is scratch of the same length (the indices chosen so far, kept sorted). ``n >= len(pick)``.
+    Parameters
+    ----------
+    u : (rows, k) float64 array
+        Uniforms in [0, 1), ``k >= len(pick)``.
+    row : int
+        The row of ``u`` to use.
+    n : int
+        The range of the indices, ``n >= len(pick)``.
+    pick, chosen : (m,) int64 arrays
+        The sample (output) and scratch of the same length (the indices chosen so far, kept sorted).
     """
-    for j in range(pick.shape[0]):
-        r = min(int(u[row, j] * (n - j)), n - j - 1)
-        t = 0
-        while t < j and r >= chosen[t]:
-            r += 1
-            t += 1
-        for i in range(j, t, -1):
-            chosen[i] = chosen[i - 1]
-        chosen[t] = r
-        pick[j] = r
+    u = _uniforms(u)
+    if not (0 <= row < u.shape[0] and len(pick) <= u.shape[1] and len(chosen) >= len(pick)):
+        raise InputError(f"row {row} of uniforms {u.shape} cannot give a sample of {len(pick)} with scratch of "
+                         f"{len(chosen)}")
+    _search.sample_distinct(u, int(row), int(n), pick, chosen)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def sample4(u, row, n):  # pragma: no cover - compiled
+def sample4(u, row: int, n: int) -> tuple[int, int, int, int]:
     """Four distinct indices in [0, n) from the uniforms ``u[row, :4]``: :func:`sample_distinct` for a sample of
     4, as a tuple. ``n >= 4``."""
-    a = min(int(u[row, 0] * n), n - 1)
-    b = min(int(u[row, 1] * (n - 1)), n - 2)
-    c = min(int(u[row, 2] * (n - 2)), n - 3)
-    d = min(int(u[row, 3] * (n - 3)), n - 4)
-    if b >= a:
-        b += 1
-    lo = min(a, b)
-    hi = max(a, b)
-    if c >= lo:
-        c += 1
-    if c >= hi:
-        c += 1
-    x0 = min(lo, c)
-    x2 = max(hi, c)
-    x1 = lo + hi + c - x0 - x2
-    if d >= x0:
-        d += 1
-    if d >= x1:
-        d += 1
-    if d >= x2:
-        d += 1
-    return a, b, c, d
+    u = _uniforms(u)
+    if not (0 <= row < u.shape[0] and u.shape[1] >= 4):
+        raise InputError(f"row {row} of uniforms {u.shape} cannot give a sample of 4")
+    return _search.sample4(u, int(row), int(n))
 
 
-@njit(cache=True, error_model="numpy")
-def draw_samples(u, n):  # pragma: no cover - compiled
-    """One sample of ``u.shape[1]`` distinct indices in [0, n) per row of the uniforms ``u``: (rows, k) int64."""
-    k = u.shape[1]
-    out = np.empty((u.shape[0], k), np.int64)
-    chosen = np.empty(k, np.int64)
-    for i in range(u.shape[0]):
-        sample_distinct(u, i, n, out[i], chosen)
-    return out
+def draw_samples(u, n: int) -> np.ndarray:
+    """One sample of ``u.shape[1]`` distinct indices in [0, n) per row of the uniforms ``u``: (rows, k) int64.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cvpipe.robust import draw_samples
+    >>> idx = draw_samples(np.random.default_rng(0).random((5, 3)), 10)
+    >>> idx.shape, bool((np.sort(idx, axis=1)[:, 1:] > np.sort(idx, axis=1)[:, :-1]).all())
+    ((5, 3), True)
+    """
+    return _search.draw_samples(_uniforms(u), int(n))

@@ -1,12 +1,12 @@
 """The search state of one RANSAC run: a numpy record with named fields, created here and updated in place by the
-numba kernels (a record is passed by reference) and by the driver :func:`cvpipe.robust.run`."""
+compiled kernels (as the C struct ``State`` of ``_core.pxd``, same fields in the same order) and by the driver
+:func:`cvpipe.robust.run`."""
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
-from .stopping import sprt_threshold
+from . import _search
 
 #: The fields of the state:
 #:
@@ -28,27 +28,6 @@ STATE = np.dtype([
 ], align=True)
 
 
-@njit(cache=True, error_model="numpy")
-def _start(state, max_iters, sprt_eps, sprt_delta, sprt_tm):  # pragma: no cover - compiled
-    """Fill the record ``state[0]`` as :func:`new_state` describes (one compiled call: the Python field writes cost
-    several microseconds, a noticeable share of a homography's half millisecond)."""
-    s = state[0]
-    s.best_cost = np.inf
-    s.best_inliers = 0
-    s.bound = max_iters
-    s.iterations = 0
-    s.attempts = 0
-    s.degenerate = 0
-    s.lo_runs = 0
-    s.sprt_eps = sprt_eps
-    s.sprt_delta = sprt_delta
-    s.sprt_tm = sprt_tm
-    s.sprt_a = sprt_threshold(sprt_eps, sprt_delta, sprt_tm)
-    s.bad_consistent = 0
-    s.bad_seen = 0
-    s.bad_models = 0
-
-
 def new_state(max_iters: int, sprt_eps: float = 0.0, sprt_delta: float = 0.0, sprt_tm: float = 0.0) -> np.ndarray:
     """The state before the first hypothesis: no model, the bound at ``max_iters``.
 
@@ -65,8 +44,11 @@ def new_state(max_iters: int, sprt_eps: float = 0.0, sprt_delta: float = 0.0, sp
     Returns
     -------
     (1,) array of dtype :data:`STATE`
-        Pass it whole to the kernels (``state[0]`` there is the record); read a field as ``state["iterations"][0]``.
+        Pass it whole to the kernels and to :func:`on_new_best`, :func:`on_rejected`; read a field as
+        ``state["iterations"][0]``.
     """
     state = np.empty(1, STATE)
-    _start(state, float(max_iters), float(sprt_eps), float(sprt_delta), float(sprt_tm))
+    # one compiled call fills the record (Python field writes cost several microseconds, a noticeable share of a
+    # homography's half millisecond)
+    _search.start(state, float(max_iters), float(sprt_eps), float(sprt_delta), float(sprt_tm))
     return state

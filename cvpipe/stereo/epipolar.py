@@ -24,7 +24,7 @@ pair to the epipolar variety, in pixels) is at most ``threshold``. The pipeline 
    homography explains as well as ``F`` (a planar scene, or a pure rotation with no baseline), where ``F`` is not
    determined; each raises :class:`cvpipe.errors.EstimationError` saying what to change.
 
-The loops are numba kernels (:mod:`cvpipe.stereo._kernels`): the 7-point solve and MSAC scoring of a batch of
+The loops are compiled kernels (:mod:`cvpipe.stereo._epipolar`): the 7-point solve and MSAC scoring of a batch of
 samples, the Sampson distances, the 8-point solve from the accumulated 9x9 normal matrix with the rank-2 projection,
 and the reweighting rounds of the final refinement (with the median of the noise scale); this module draws the
 samples, keeps the so-far-best models and the starts of the final refinement, and raises the errors.
@@ -41,8 +41,8 @@ from ..errors import EstimationError, InputError, check_int
 from ..geometry import as_points, hartley_normalization
 from ..params import StereoRectifyParams
 from ..robust import iterations_needed, new_state, run
-from . import _kernels as K
-from ._kernels import _FINAL_WSCALE, _MAD_TO_SIGMA, _MIN_C, _RANK_EPS, _REFINE_ROUNDS, _TUKEY_C  # noqa: F401
+from . import _epipolar as K
+from ._epipolar import _FINAL_WSCALE, _MAD_TO_SIGMA, _MIN_C, _RANK_EPS, _REFINE_ROUNDS, _TUKEY_C  # noqa: F401
 
 #: default iteration cap of :func:`find_fundamental` (7-point samples; ~65 % outliers at confidence 0.999)
 DEFAULT_MAX_ITERS = 5_000
@@ -54,7 +54,7 @@ _RECTIFY = StereoRectifyParams()
 _ALL_COLLINEAR_EPS = 1e-6
 #: the rank test of a 7-point sample (``_RANK_EPS``), the rounds of the final refit (``_REFINE_ROUNDS``) and its
 #: Tukey cut-off (``_FINAL_WSCALE``, ``_TUKEY_C``, ``_MAD_TO_SIGMA``, ``_MIN_C``) are declared beside the kernels
-#: that use them, in :mod:`cvpipe.stereo._kernels`
+#: that use them, in :mod:`cvpipe.stereo._epipolar`
 #: RANSAC models that each get the final refinement (the most recent so-far-best ones and the lowest-cost ones
 #: of the whole run, a few per batch), the lowest final cost wins; and the fewest samples drawn. With little depth
 #: variation the cost is flat along the epipole's distance and the refinement has several basins: on an
@@ -146,8 +146,10 @@ _SOLVE_ERRORS = {
 
 
 def _products(x1n: np.ndarray, x2n: np.ndarray) -> np.ndarray:
-    """The (N, 36) products of the 8-point system's monomials (:func:`cvpipe.stereo._kernels.design_products`)."""
-    return K.design_products(x1n, x2n, np.empty((len(x1n), 36)))
+    """The (N, 36) products of the 8-point system's monomials (:func:`cvpipe.stereo._epipolar.design_products`)."""
+    P = np.empty((len(x1n), 36))
+    K.design_products(x1n, x2n, P)
+    return P
 
 
 def _columns(p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
@@ -249,8 +251,7 @@ def seven_point(pts1, pts2) -> list[np.ndarray]:
         raise InputError(f"the 7-point solver needs exactly 7 correspondences, got {len(p1)} and {len(p2)}")
     T1, T2 = hartley_normalization(p1), hartley_normalization(p2)
     Fns = np.empty((3, 3, 3))
-    count = K.seven_point(_apply(T1, p1), _apply(T2, p2), np.arange(7), Fns, np.empty((7, 9)), np.empty((3, 3)),
-                          np.empty((3, 3)), np.empty((3, 3)), np.empty(3), np.empty(9, np.int64))
+    count = K.seven_point(_apply(T1, p1), _apply(T2, p2), np.arange(7, dtype=np.int64), Fns)
     if count == 0:
         raise EstimationError("the 7-point sample is degenerate (repeated or collinear points); draw another")
     return [_unit(T2.T @ f @ T1) for f in Fns[:count]]
@@ -279,7 +280,8 @@ def sampson_distance(F, pts1, pts2) -> np.ndarray:
     p2 = np.ascontiguousarray(np.asarray(pts2, dtype=np.float64).reshape(-1, 2))
     if len(p1) != len(p2):  # the broadcasting error of the former vectorized version
         raise ValueError(f"`pts1` and `pts2` must have the same number of points, got {len(p1)} and {len(p2)}")
-    d = K.sampson_distances(Fs, p1, p2, np.empty((len(Fs), len(p1))))
+    d = np.empty((len(Fs), len(p1)))
+    K.sampson_distances(Fs, p1, p2, d)
     return d[0] if single else d
 
 
@@ -295,7 +297,7 @@ def epipoles(F) -> tuple[np.ndarray, np.ndarray]:
 def _noise_cutoff(d: np.ndarray, threshold: float) -> float:
     """Tukey's cut-off ``_TUKEY_C * sigma`` for Sampson distances ``d``, with the noise scale ``sigma`` estimated
     robustly from the inliers (``1.4826 * median`` of the distances within ``threshold``), kept within
-    ``[_MIN_C, _FINAL_WSCALE] * threshold`` (the kernel :func:`cvpipe.stereo._kernels.noise_cutoff`)."""
+    ``[_MIN_C, _FINAL_WSCALE] * threshold`` (the kernel :func:`cvpipe.stereo._epipolar.noise_cutoff`)."""
     d = np.ascontiguousarray(d, dtype=np.float64)
     return float(K.noise_cutoff(d, float(threshold), np.empty(len(d)), False))
 
