@@ -315,6 +315,9 @@ def cluster(scheduler: str, workers: int | None = None, *, timeout: float = CONN
     if s == "":
         yield None
         return
+    from .errors import require_extra
+
+    require_extra("distributed", "dask", "a Dask scheduler (`compute.scheduler`, `--scheduler`)")
     import dask
     from distributed import Client, LocalCluster
 

@@ -153,3 +153,18 @@ def check_int(name: str, value: object, minimum: int | None = None, maximum: int
         allowed += f" ({note})"
     where = f"{source}: " if source else ""
     raise InputError(f"{where}`{name}` must be an integer{allowed}, got {value!r}", file=source)
+
+
+def require_extra(module: str, extra: str, needed_for: str):
+    """Import ``module`` of an optional dependency, or raise :class:`InputError` naming the extra that installs it.
+
+    ``pip install cvpipe`` brings the library and the commands; the pipeline (dvc), Dask and the bundled samples'
+    renderers come with the extras ``cvpipe[pipeline]``, ``cvpipe[dask]`` and ``cvpipe[samples]``.
+    """
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:
+        raise InputError(f"{needed_for} needs the Python package {module.split('.')[0]!r}, which the {extra!r} "
+                         f"extra installs: pip install 'cvpipe[{extra}]'") from exc

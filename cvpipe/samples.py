@@ -13,6 +13,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from .errors import require_extra
 from .params import SamplesParams, section_or_default
 
 #: the ``samples`` defaults: the one declaration of :func:`make_logo`'s scene counts
@@ -44,12 +45,12 @@ class SampleSet:
 
 def photo(name: str) -> np.ndarray:
     """A scikit-image photo as BGR uint8."""
-    import skimage.data
+    skimage_data = require_extra("skimage.data", "samples", "the bundled samples")
 
     if name == "motorcycle":
-        img = skimage.data.stereo_motorcycle()[0]
+        img = skimage_data.stereo_motorcycle()[0]
     else:
-        img = getattr(skimage.data, name)()
+        img = getattr(skimage_data, name)()
     img = np.asarray(img)
     if img.ndim == 2:
         return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
@@ -69,8 +70,8 @@ def fit(img: np.ndarray, width: int, height: int, rng: np.random.Generator | Non
 
 def render_mark(slug: str, size: int = 256, pad: float = 0.1) -> np.ndarray:
     """A simple-icons brand mark in its brand colour on a white square card, BGR uint8 (size x size)."""
-    import resvg_py
-    import simple_icons_pack
+    resvg_py = require_extra("resvg_py", "samples", "the bundled samples' brand marks")
+    simple_icons_pack = require_extra("simple_icons_pack", "samples", "the bundled samples' brand marks")
 
     icon = simple_icons_pack.get_icon(slug)
     if icon is None:
@@ -343,9 +344,9 @@ def make_homography(rng: np.random.Generator, width: int = 640, height: int = 48
 
 def make_stereo() -> SampleSet:
     """The Middlebury motorcycle pair bundled with scikit-image, with its true disparity (NaN = unknown)."""
-    import skimage.data
+    skimage_data = require_extra("skimage.data", "samples", "the bundled samples")
 
-    left, right, disp = skimage.data.stereo_motorcycle()
+    left, right, disp = skimage_data.stereo_motorcycle()
     disp = np.where(np.isfinite(disp), disp, np.nan).astype(np.float32)
     out = SampleSet()
     out.images["left.png"] = np.ascontiguousarray(left[..., ::-1])
@@ -389,9 +390,9 @@ def make_stereo_unrectified(rng: np.random.Generator, name: str = "motorcycle_un
     texts : dict
         ``{"<name>/calib.txt": Middlebury calib.txt text}`` of the original rig at the sample's size.
     """
-    import skimage.data
+    skimage_data = require_extra("skimage.data", "samples", "the bundled samples")
 
-    left, right, disp = skimage.data.stereo_motorcycle()
+    left, right, disp = skimage_data.stereo_motorcycle()
     disp = np.where(np.isfinite(disp), disp, np.nan).astype(np.float32)
     h, w = left.shape[:2]
     c = MOTORCYCLE_CALIB

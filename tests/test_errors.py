@@ -43,3 +43,15 @@ class TestCheckInt:
     def test_examples_run(self):
         result = doctest.testmod(cvpipe.errors, optionflags=doctest.NORMALIZE_WHITESPACE)
         assert result.attempted > 0 and result.failed == 0
+
+
+def test_a_missing_optional_dependency_names_the_extra_that_installs_it(monkeypatch):
+    import sys
+
+    from cvpipe.errors import InputError, require_extra
+
+    monkeypatch.setitem(sys.modules, "distributed", None)  # as if the dask extra were not installed
+    with pytest.raises(InputError, match=r"a Dask scheduler needs the Python package 'distributed', which the 'dask' "
+                                         r"extra installs: pip install 'cvpipe\[dask\]'"):
+        require_extra("distributed", "dask", "a Dask scheduler")
+    assert require_extra("json", "dask", "x") is sys.modules["json"]
