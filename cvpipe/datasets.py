@@ -3,7 +3,9 @@
 Each ``find_<task>(folder)`` lists what is there and returns the items plus what it could not use (``dropped``,
 each ``{"item", "reason"}``), so that nothing is skipped silently. Ground truth is optional everywhere: an item
 carries its truth when the folder's ``truth.json`` (the bundled samples' format) names it, else ``None``. A truth
-file that exists but is malformed raises :class:`~cvpipe.errors.InputError` naming the file and the field.
+file is read with a size limit (:data:`TRUTH_MAX_BYTES`) and every field it uses is checked for its type (a name
+is a non-empty string, a matrix or a list of lines, boxes or corners is finite numbers of its shape); a file that
+breaks this raises :class:`~cvpipe.errors.InputError` naming the file and the field (``probes[1].boxes``).
 
 Layouts (any of png, jpg/jpeg, tif/tiff, bmp, webp, in any letter case):
 
@@ -34,6 +36,8 @@ from .errors import InputError, check_int
 from .io import IMAGE_SUFFIXES, load_json, load_npz, read_text
 
 TRUTH_FILE = "truth.json"
+#: largest ``truth.json`` read, bytes (a truth file holds a few numbers per image)
+TRUTH_MAX_BYTES = 64_000_000
 
 
 def images_in(folder: Path) -> list[Path]:
@@ -53,14 +57,34 @@ def _drop(dropped: list[dict], item: Path | str, reason: str) -> None:
     dropped.append({"item": str(item), "reason": reason})
 
 
+def _shown(value: Any, limit: int = 60) -> str:
+    """``repr(value)`` cut to ``limit`` characters, for a one-line message."""
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def read_truth(path: Path) -> dict:
+    """A ``truth.json`` as a JSON object, read with the size limit :data:`TRUTH_MAX_BYTES`.
+
+    Raises
+    ------
+    InputError
+        Over the limit, not UTF-8 JSON, nested too deeply, or not an object; the message names the file.
+    """
+    data = load_json(path, TRUTH_MAX_BYTES, "truth JSON")
+    if not isinstance(data, dict):
+        raise InputError(f"{path}: expected a JSON object, got {_shown(data)}")
+    return data
+
+
 def _truth(folder: Path, key: str) -> list[tuple[Path, str, dict]]:
     """``(truth file, "key[i]", record)`` for each record under ``key`` of ``folder/truth.json`` (the middle item
     names the record in messages); none when there is no truth file."""
     path = folder / TRUTH_FILE
     if not path.is_file():
         return []
-    data = load_json(path)
-    if not isinstance(data, dict) or not isinstance(data.get(key), list):
+    data = read_truth(path)
+    if not isinstance(data.get(key), list):
         raise InputError(f"{path}: field `{key}` must be a list of records")
     for i, rec in enumerate(data[key]):
         if not isinstance(rec, dict):
@@ -68,26 +92,72 @@ def _truth(folder: Path, key: str) -> list[tuple[Path, str, dict]]:
     return [(path, f"{key}[{i}]", rec) for i, rec in enumerate(data[key])]
 
 
-def _file_name(path: Path, rec: dict, where: str) -> str:
-    """The bare file name in the record's ``file`` field (a truth file may list ``probes/x.png``)."""
-    return Path(str(_field(path, rec, where, "file"))).name
-
-
-def _field(path: Path, rec: dict, where: str, name: str, shape: tuple[int, ...] | None = None) -> Any:
-    """``rec[name]``, checked to exist (and to be a finite array of ``shape``), naming file and field otherwise."""
+def _field(path: Path, rec: dict, where: str, name: str) -> Any:
+    """``rec[name]``, naming file and field when it is missing."""
     if name not in rec:
         raise InputError(f"{path}: field `{where}.{name}` is missing")
-    value = rec[name]
-    if shape is None:
-        return value
+    return rec[name]
+
+
+def _text(path: Path, rec: dict, where: str, name: str, null: bool = False) -> str | None:
+    """``rec[name]`` as a non-empty string (or None when ``null`` allows a JSON null), naming file and field
+    otherwise."""
+    value = _field(path, rec, where, name)
+    if value is None and null:
+        return None
+    if not isinstance(value, str) or not value:
+        raise InputError(f"{path}: field `{where}.{name}` must be a non-empty string{' or null' if null else ''}, "
+                         f"got {_shown(value)}")
+    return value
+
+
+def _file_name(path: Path, rec: dict, where: str) -> str:
+    """The bare file name in the record's ``file`` field (a truth file may list ``probes/x.png``)."""
+    return Path(_text(path, rec, where, "file")).name
+
+
+def _first_non_number(value: Any, depth: int, at: str = "") -> tuple[str, Any] | None:
+    """``(index, item)`` of the first item of the nested lists ``value`` (``depth`` levels) that is not a JSON
+    number (a bool, a string, an object, null or a list nested deeper), or None."""
+    if isinstance(value, list) and depth > 0:
+        for i, v in enumerate(value):
+            got = _first_non_number(v, depth - 1, f"{at}[{i}]")
+            if got is not None:
+                return got
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return at, value
+    return None
+
+
+def _numbers(path: Path, where: str, value: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """``value`` as a float array of ``shape`` (``-1``: any count, ``[]`` being none) holding finite numbers only;
+    InputError naming the file, the field ``where`` and what was wrong otherwise."""
+    want = "finite numbers of shape (" + ", ".join("N" if n < 0 else str(n) for n in shape) + \
+        ("," if len(shape) == 1 else "") + ")"
+    bad = _first_non_number(value, len(shape))
+    if bad is not None:
+        at, item = bad
+        raise InputError(f"{path}: field `{where}` must be {want}, got {_shown(item)}" + (f" at {at}" if at else ""))
     try:
         arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(f"{path}: field `{where}.{name}` must be numbers of shape {shape}") from None
-    if arr.shape != shape or not np.all(np.isfinite(arr)):
-        raise InputError(f"{path}: field `{where}.{name}` must be finite numbers of shape {shape}, "
-                         f"got shape {arr.shape}")
+    except ValueError:
+        raise InputError(f"{path}: field `{where}` must be {want}, got lists of unequal length") from None
+    except OverflowError:
+        raise InputError(f"{path}: field `{where}` must be {want}, got a number too large for a float") from None
+    if arr.shape == (0,) and shape[0] < 0:
+        arr = arr.reshape((0,) + tuple(max(n, 0) for n in shape[1:]))
+    if arr.ndim != len(shape) or any(n >= 0 and a != n for a, n in zip(arr.shape, shape)):
+        raise InputError(f"{path}: field `{where}` must be {want}, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        at = "".join(f"[{i}]" for i in np.argwhere(~np.isfinite(arr))[0])
+        raise InputError(f"{path}: field `{where}` must be {want}, got NaN or infinity at {at}")
     return arr
+
+
+def _array(path: Path, rec: dict, where: str, name: str, shape: tuple[int, ...]) -> np.ndarray:
+    """``rec[name]`` as :func:`_numbers` of ``shape``, naming file and field when it is missing or malformed."""
+    return _numbers(path, f"{where}.{name}", _field(path, rec, where, name), shape)
 
 
 # ---------------------------------------------------------------------------------------------------------- hough
@@ -105,9 +175,8 @@ def find_hough(folder: str | os.PathLike) -> tuple[list[HoughImage], list[dict]]
     d = _folder(folder, "hough")
     truth: dict[str, np.ndarray] = {}
     for path, where, rec in _truth(d, "images"):
-        lines = np.asarray(_field(path, rec, where, "lines"), dtype=float).reshape(-1, 2) \
-            if rec.get("lines") is not None else np.zeros((0, 2))
-        truth[str(_field(path, rec, where, "file"))] = lines
+        lines = _array(path, rec, where, "lines", (-1, 2)) if rec.get("lines") is not None else np.zeros((0, 2))
+        truth[_text(path, rec, where, "file")] = lines
     items = [HoughImage(f.stem, f, truth.get(f.name)) for f in images_in(d)]
     return _unique(items, "hough"), []
 
@@ -149,7 +218,7 @@ def find_homography(folder: str | os.PathLike) -> tuple[list[ImagePair], list[di
             _drop(dropped, sub.name, f"a pair folder must hold exactly 2 images, found {len(imgs)}")
             continue
         pairs.append(ImagePair(sub.name, imgs[0], imgs[1]))
-    truth = {str(_field(path, r, where, "name")): _field(path, r, where, "H", (3, 3))
+    truth = {_text(path, r, where, "name"): _array(path, r, where, "H", (3, 3))
              for path, where, r in _truth(d, "pairs")}
     if truth:
         pairs = [ImagePair(p.name, p.a, p.b, truth.get(p.name)) for p in pairs]
@@ -187,9 +256,9 @@ def find_defect(folder: str | os.PathLike) -> tuple[DefectInputs, list[dict]]:
     for path, where, r in _truth(d, "probes"):
         verdict = _field(path, r, where, "verdict")
         if verdict not in ("faulty", "perfect"):
-            raise InputError(f"{path}: field `{where}.verdict` must be 'faulty' or 'perfect', got {verdict!r}")
-        boxes = np.asarray(r.get("boxes") or np.zeros((0, 4)), dtype=float).reshape(-1, 4)
-        H = _field(path, r, where, "H", (3, 3)) if "H" in r else None
+            raise InputError(f"{path}: field `{where}.verdict` must be 'faulty' or 'perfect', got {_shown(verdict)}")
+        boxes = _array(path, r, where, "boxes", (-1, 4)) if r.get("boxes") is not None else np.zeros((0, 4))
+        H = _array(path, r, where, "H", (3, 3)) if r.get("H") is not None else None
         truth[_file_name(path, r, where)] = dict(verdict=verdict, boxes=boxes, H=H)
     probes = [Probe(f.stem, f, **truth.get(f.name, {})) for f in images_in(probes_dir)]
     dropped: list[dict] = []
@@ -246,10 +315,10 @@ def find_logo(folder: str | os.PathLike) -> tuple[LogoInputs, list[dict]]:
         raise InputError(f"{gdir}: no gallery images (one image per brand, named after the brand)")
     truth: dict[str, dict] = {}
     for path, where, r in _truth(d, "scenes"):
-        brand = _field(path, r, where, "brand")
+        brand = _text(path, r, where, "brand", null=True)
         if brand is not None and brand not in gallery:
             raise InputError(f"{path}: field `{where}.brand` is {brand!r}, which is not a gallery brand")
-        quad = _field(path, r, where, "quad", (4, 2)) if r.get("quad") is not None else None
+        quad = _array(path, r, where, "quad", (4, 2)) if r.get("quad") is not None else None
         truth[_file_name(path, r, where)] = dict(brand=brand, quad=quad, labelled=True)
     scenes = [Scene(f.stem, f, **truth.get(f.name, {})) for f in images_in(sdir)]
     if not scenes:
@@ -281,9 +350,7 @@ def _stereo_pair(d: Path, name: str) -> StereoPair | str:
     max_disp = None
     calib = next((d / n for n in CALIB_FILES if (d / n).is_file()), None)
     if (d / TRUTH_FILE).is_file():
-        data = load_json(d / TRUTH_FILE)
-        if not isinstance(data, dict):
-            raise InputError(f"{d / TRUTH_FILE}: expected a JSON object")
+        data = read_truth(d / TRUTH_FILE)
         if "max_disp" in data:
             max_disp = check_int("max_disp", data["max_disp"], 1, source=str(d / TRUTH_FILE))
     if max_disp is None and calib is not None and calib.suffix == ".txt":
@@ -335,15 +402,15 @@ def read_stereo_truth(path: str | os.PathLike, shape: tuple[int, ...]) -> np.nda
     Raises
     ------
     InputError
-        The file is unreadable, has no ``disparity`` field, or its shape is not ``shape``.
+        The file is unreadable, has no ``disparity`` array, or that array is not numbers of ``shape``.
     """
-    arrays = load_npz(path)
-    if "disparity" not in arrays:
-        raise InputError(f"{path}: field `disparity` is missing")
-    truth = arrays["disparity"].astype(np.float32)
-    if truth.shape != shape:
-        raise InputError(f"{path}: field `disparity` has shape {truth.shape}, the left image is {shape}")
-    return truth
+    disparity = load_npz(path, ("disparity",))["disparity"]
+    if disparity.dtype.kind not in "iuf":
+        raise InputError(f"{path}: array `disparity` must hold numbers (pixels, NaN = unknown), got dtype "
+                         f"{disparity.dtype}")
+    if disparity.shape != shape:
+        raise InputError(f"{path}: array `disparity` has shape {disparity.shape}, the left image is {shape}")
+    return disparity.astype(np.float32)
 
 
 # ------------------------------------------------------------------------------------------------------- panorama
@@ -371,8 +438,9 @@ def find_panorama(folder: str | os.PathLike) -> tuple[list[PanoramaSet], list[di
         Hs = _field(path, r, where, "H")
         if not isinstance(names, list) or not isinstance(Hs, list) or len(names) != len(Hs):
             raise InputError(f"{path}: fields `{where}.images` and `{where}.H` must be lists of equal length")
-        truth[str(_field(path, r, where, "name"))] = {
-            Path(str(n)).name: _field(path, {f"H[{k}]": h}, where, f"H[{k}]", (3, 3))
+        truth[_text(path, r, where, "name")] = {
+            Path(_text(path, {f"images[{k}]": n}, where, f"images[{k}]")).name:
+                _array(path, {f"H[{k}]": h}, where, f"H[{k}]", (3, 3))
             for k, (n, h) in enumerate(zip(names, Hs))
         }
     sets = []

@@ -95,6 +95,9 @@ class Features:
     descriptors: np.ndarray
     detector: str
 
+    #: the arrays of :meth:`to_arrays`, the keys a cached ``.npz`` must hold for :meth:`from_arrays`
+    ARRAYS = ("xy", "size", "angle", "response", "descriptors", "detector")
+
     def __len__(self) -> int:
         return len(self.xy)
 
@@ -115,6 +118,10 @@ class Features:
         detector = str(arrays["detector"])
         check_detector(detector)
         return cls(arrays["xy"], arrays["size"], arrays["angle"], arrays["response"], arrays["descriptors"], detector)
+
+
+#: the arrays of a features stage's ``.npz`` per image (:func:`detect_item`): the features and ``image_size`` (w, h)
+NPZ_ARRAYS = Features.ARRAYS + ("image_size",)
 
 
 def check_detector(detector: str) -> None:

@@ -13,6 +13,7 @@ import os
 import re
 import secrets
 import zipfile
+import zlib
 from pathlib import Path
 from typing import Any, Iterable, Iterator, TypeVar
 
@@ -511,6 +512,52 @@ def save_image(path: str | os.PathLike, img: np.ndarray, jpeg_quality: int = 95)
         tmp.write_bytes(buf.tobytes())
 
 
+#: largest width x height of a picture the pipeline draws for the report page (overlays, panels, montages): far
+#: under the read limit :data:`DEFAULT_MAX_PIXELS`, so that the report stage reads back every picture the stages
+#: wrote, whatever the size of the inputs, and the page stays light
+PICTURE_MAX_PIXELS = 16_000_000
+
+
+def picture_scale(width: int, height: int, max_pixels: int | None = None) -> float:
+    """The factor (at most 1) that brings a ``width`` x ``height`` picture within ``max_pixels`` pixels.
+
+    ``max_pixels`` None means :data:`PICTURE_MAX_PIXELS`. :func:`fit_picture` resizes by it.
+    """
+    limit = PICTURE_MAX_PIXELS if max_pixels is None else check_int("max_pixels", max_pixels, 1)
+    return min(1.0, (limit / (width * height)) ** 0.5)
+
+
+def fit_picture(img: np.ndarray, max_pixels: int | None = None) -> np.ndarray:
+    """``img`` itself when its width x height is within ``max_pixels`` (None: :data:`PICTURE_MAX_PIXELS`), else
+    ``img`` shrunk to fit, aspect ratio kept (area averaging, so thin lines fade rather than vanish).
+
+    Parameters
+    ----------
+    img : (H, W) or (H, W, C) ndarray
+    max_pixels : int, optional
+
+    Returns
+    -------
+    ndarray
+        ``(h, w, ...)`` with ``w * h <= max_pixels``: ``w = floor(W * f)``, ``h = floor(H * f)`` (at least 1),
+        ``f`` = :func:`picture_scale`.
+    """
+    h, w = img.shape[:2]
+    limit = PICTURE_MAX_PIXELS if max_pixels is None else check_int("max_pixels", max_pixels, 1)
+    f = picture_scale(w, h, limit)
+    if f >= 1.0:
+        return img
+    nw = min(limit, max(1, int(w * f)))
+    nh = min(max(1, int(h * f)), max(1, limit // nw))  # a product rounded up past the limit loses a row
+    return cv2.resize(img, (nw, nh), interpolation=cv2.INTER_AREA)
+
+
+def save_picture(path: str | os.PathLike, img: np.ndarray, max_pixels: int | None = None) -> None:
+    """Write a picture for the report page atomically, shrunk by :func:`fit_picture` when it has more than
+    ``max_pixels`` (None: :data:`PICTURE_MAX_PIXELS`); the format follows the suffix, as :func:`save_image`."""
+    save_image(path, fit_picture(img, max_pixels))
+
+
 def save_npz(path: str | os.PathLike, **arrays: Any) -> None:
     """Write named arrays to a compressed ``.npz`` atomically (no object arrays, so no pickle is needed to load)."""
     clean = {}
@@ -530,15 +577,83 @@ def save_npz(path: str | os.PathLike, **arrays: Any) -> None:
                     np.lib.format.write_array(member, clean[key], allow_pickle=False)
 
 
+#: what a damaged ``.npz`` or ``.npy`` raises while it is read (a cut-off or corrupted file, a pickled array)
+_ARRAY_FILE_ERRORS = (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error)
+
+
+def _expecting(keys: tuple[str, ...]) -> str:
+    return f"; expected an .npz holding {', '.join(f'`{k}`' for k in keys)}" if keys else ""
+
+
 @_about_file
-def load_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
-    """Read every array of an ``.npz`` written by :func:`save_npz` (``allow_pickle=False``)."""
+def load_npz(path: str | os.PathLike, keys: Iterable[str] = ()) -> dict[str, np.ndarray]:
+    """Read every array of an ``.npz`` written by :func:`save_npz` (``allow_pickle=False``).
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.npz`` file (a stage's cached output or a user's ``truth.npz``).
+    keys : iterable of str
+        The arrays the caller needs; the messages name them.
+
+    Returns
+    -------
+    dict
+        Array name -> array, every array of the file.
+
+    Raises
+    ------
+    InputError
+        One line naming the file and ``keys``: missing, not a zip of ``.npy`` arrays, cut off or corrupted, an
+        array that needs pickle, or one of ``keys`` missing.
+    """
+    keys = tuple(keys)
     p = existing_file(path, "an .npz")
     try:
+        with open(p, "rb") as fh:
+            magic = fh.read(4)
+    except OSError as exc:
+        raise InputError(f"{p}: cannot read the .npz ({exc.strerror or exc}){_expecting(keys)}") from exc
+    if not magic:
+        raise InputError(f"{p}: file is empty (0 bytes){_expecting(keys) or ', expected an .npz archive'}")
+    if magic[:2] != b"PK":  # every zip starts so; a bare .npy or a text file does not
+        raise InputError(f"{p}: not an .npz archive (a zip of .npy arrays){_expecting(keys)}")
+    try:
         with np.load(p, allow_pickle=False) as z:
-            return {k: z[k] for k in z.files}
-    except (ValueError, OSError, EOFError) as exc:
-        raise InputError(f"{p}: not a readable .npz archive ({exc})") from exc
+            arrays = {k: z[k] for k in z.files}
+    except _ARRAY_FILE_ERRORS as exc:
+        raise InputError(f"{p}: not a readable .npz archive ({exc}){_expecting(keys)}") from exc
+    missing = [k for k in keys if k not in arrays]
+    if missing:
+        raise InputError(f"{p}: missing array(s) {', '.join(f'`{k}`' for k in missing)}{_expecting(keys)}")
+    return arrays
+
+
+@_about_file
+def load_npy(path: str | os.PathLike, what: str = "array") -> np.ndarray:
+    """Read one array saved by :func:`numpy.save` (``allow_pickle=False``), naming the file when it cannot.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.npy`` file.
+    what : str
+        How the messages name its content, e.g. ``"disparity"``.
+
+    Raises
+    ------
+    InputError
+        Missing, empty, cut off, corrupted, or an array that needs pickle.
+    """
+    p = existing_file(path, "an .npy")
+    try:
+        arr = np.load(p, allow_pickle=False)
+    except _ARRAY_FILE_ERRORS as exc:
+        raise InputError(f"{p}: not a readable .npy {what} array ({exc})") from exc
+    if not isinstance(arr, np.ndarray):
+        arr.close()
+        raise InputError(f"{p}: an .npz archive, expected a single .npy {what} array")
+    return arr
 
 
 def _jsonable(obj: Any) -> Any:
@@ -569,14 +684,42 @@ def save_json(path: str | os.PathLike, obj: Any) -> None:
         tmp.write_text(text, encoding="utf-8")
 
 
+#: default upper bound on the size of a JSON file we parse, bytes (a stage's own results; users' truth files have
+#: their own, smaller limit: :data:`cvpipe.datasets.TRUTH_MAX_BYTES`)
+DEFAULT_MAX_JSON_BYTES = 512_000_000
+
+
 @_about_file
-def load_json(path: str | os.PathLike) -> Any:
-    """Read a JSON file, naming the file when it is missing or malformed."""
-    p = existing_file(path, "a JSON")
+def load_json(path: str | os.PathLike, max_bytes: int = DEFAULT_MAX_JSON_BYTES, what: str = "JSON") -> Any:
+    """Read a JSON file, naming the file when it is missing, too large or malformed.
+
+    Parameters
+    ----------
+    path : path-like
+        The file (read as :func:`read_text` does: at most ``max_bytes + 1`` bytes).
+    max_bytes : int
+        Largest accepted size, bytes.
+    what : str
+        How the messages name its content, e.g. ``"truth JSON"``.
+
+    Returns
+    -------
+    object
+        The parsed document (no type checks: the caller checks what it reads).
+
+    Raises
+    ------
+    InputError
+        Missing file, a folder, over ``max_bytes``, not UTF-8, not valid JSON or nested too deeply to parse.
+    """
+    p = Path(path)
+    text = read_text(p, what, max_bytes)
     try:
-        return json.loads(p.read_text(encoding="utf-8"))
+        return json.loads(text)
     except json.JSONDecodeError as exc:
         raise InputError(f"{p}: not valid JSON ({exc})") from exc
+    except RecursionError:
+        raise InputError(f"{p}: not a usable {what} file (lists or objects nested too deeply)") from None
 
 
 T = TypeVar("T")

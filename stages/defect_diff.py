@@ -21,7 +21,7 @@ def defect_diff(st: Stage) -> None:
     def probe_data():
         # read here, lazily: each probe's warped image(s) travel with its task
         for name, _ in probes:
-            z = io.load_npz(reg_dir / f"{name}.npz")
+            z = io.load_npz(reg_dir / f"{name}.npz", ("warped", "valid"))
             yield z["warped"], z["valid"], (z["alt_warped"], z["alt_valid"]) if "alt_H" in z else None
 
     for file, (arrays, fit, seconds) in st.map(defect.difference_item, probe_data(), shared=(ref, p),

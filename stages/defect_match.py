@@ -14,7 +14,7 @@ def defect_match(st: Stage) -> None:
     inputs, dropped = datasets.find_defect(st.args.images)
     for d in dropped:
         st.drop(d["item"], d["reason"])
-    ref = Features.from_arrays(io.load_npz(feats / f"{inputs.reference.stem}.npz"))
+    ref = Features.from_arrays(io.load_npz(feats / f"{inputs.reference.stem}.npz", Features.ARRAYS))
     # why defect_features skipped an image, when it says so
     skipped = {d["item"]: d["reason"] for d in (io.load_json(feats / "dropped.json")
                                                 if (feats / "dropped.json").is_file() else [])}
@@ -25,7 +25,7 @@ def defect_match(st: Stage) -> None:
             st.drop(probe.path.name, skipped.get(f"probes/{probe.path.name}", "no keypoints from defect_features"))
             continue
         with st.timer("match"):
-            idx = matching.match_with(ref, Features.from_arrays(io.load_npz(path)), p)
+            idx = matching.match_with(ref, Features.from_arrays(io.load_npz(path, Features.ARRAYS)), p)
         io.save_npz(out / f"{probe.name}.npz", index=idx)
         counts[probe.name] = len(idx)
     if not counts:

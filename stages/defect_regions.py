@@ -18,7 +18,8 @@ def defect_regions(st: Stage) -> None:
     differences = io.load_json(Path(a.diff) / "differences.json")
     names = sorted(differences["probes"])
     # read here, lazily: each probe's difference maps and registration record travel with its task
-    probe_data = ((io.load_npz(Path(a.diff) / f"{name}.npz"), registration[name]) for name in names)
+    probe_data = ((io.load_npz(Path(a.diff) / f"{name}.npz", defect.Difference.ARRAYS), registration[name])
+                  for name in names)
     results = []
     for _, (record, seconds) in st.map(defect.regions_item, probe_data, shared=p, desc="defect regions",
                                        names=names):

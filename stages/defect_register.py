@@ -21,7 +21,7 @@ def defect_register(st: Stage) -> None:
     inputs, _ = datasets.find_defect(a.images)
     matched = io.load_json(Path(a.matches) / "matches.json")
     ref = io.read_image(inputs.reference, "gray")
-    ref_feats = Features.from_arrays(io.load_npz(Path(a.features) / f"{inputs.reference.stem}.npz"))
+    ref_feats = Features.from_arrays(io.load_npz(Path(a.features) / f"{inputs.reference.stem}.npz", Features.ARRAYS))
     records = {}
     probes = [q for q in inputs.probes if q.name in matched["matches"]]
 
@@ -31,8 +31,9 @@ def defect_register(st: Stage) -> None:
         for probe in probes:
             try:
                 yield (io.read_image(probe.path, "gray"),
-                       Features.from_arrays(io.load_npz(Path(a.features) / "probes" / f"{probe.name}.npz")),
-                       io.load_npz(Path(a.matches) / f"{probe.name}.npz")["index"])
+                       Features.from_arrays(io.load_npz(Path(a.features) / "probes" / f"{probe.name}.npz",
+                                                        Features.ARRAYS)),
+                       io.load_npz(Path(a.matches) / f"{probe.name}.npz", ("index",))["index"])
             except CvpipeError as exc:
                 yield exc
 

@@ -33,8 +33,9 @@ def defect_report(st: Stage) -> None:
         io.save_image(out / "overlays" / f"{Path(name).stem}.png", over)
         overlays.append(over)
         if r["verdict"] is not None:
-            z = io.load_npz(Path(a.diff) / f"{Path(name).stem}.npz")
-            heat = rep.heat_map(z["alt_diff" if r["registration"] == "alternative" else "diff"], r["threshold"])
+            key = "alt_diff" if r["registration"] == "alternative" else "diff"
+            z = io.load_npz(Path(a.diff) / f"{Path(name).stem}.npz", (key,))
+            heat = rep.heat_map(z[key], r["threshold"])
             heats.append(rep.caption(heat, f"{name}: score {r['score']:.0f}"))
     pictures = []
     for key, images, caption in (
@@ -42,7 +43,7 @@ def defect_report(st: Stage) -> None:
             ("heatmaps", heats, "tolerant difference in the reference frame (the colour scale saturates at twice "
                                 "the threshold)")):
         if images:
-            io.save_image(out / f"{key}.png", rep.montage(images, COLS))
+            io.save_picture(out / f"{key}.png", rep.montage(images, COLS))
             pictures.append({"path": (out / f"{key}.png").as_posix(), "caption": caption})
     dropped = [{"item": r["probe"], "reason": r["error"]} for r in records if r["verdict"] is None]
     st.save_metrics(out / "metrics.json", rep.metrics_of(records, evaluated))

@@ -16,7 +16,8 @@ def homography_estimate(st: Stage) -> None:
     if not files:
         raise InputError(f"{a.matches}: no <pair>.npz matches (run homography_match)")
     out, results = Path(a.out), {}
-    pairs = (tuple(io.load_npz(f)[k] for k in ("src", "dst")) for f in files)  # read lazily, sent with the task
+    # read lazily, sent with the task
+    pairs = (tuple(io.load_npz(f, ("src", "dst"))[k] for k in ("src", "dst")) for f in files)
     first = True
     for name, (fit, seconds) in st.map(estimate_item, pairs, shared=(a.method, p), desc=f"estimate {a.method}",
                                        names=[f.stem for f in files]):

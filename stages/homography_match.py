@@ -6,7 +6,7 @@ from pathlib import Path
 
 from cvpipe import datasets, io, matching
 from cvpipe.errors import CvpipeError
-from cvpipe.features import Features
+from cvpipe.features import NPZ_ARRAYS, Features
 from stages._runner import Stage, run
 
 
@@ -25,7 +25,7 @@ def homography_match(st: Stage) -> None:
         if lost:
             st.drop(pair.name, "; ".join(unreadable.get(r, f"{r}: no features") for r in lost))
             continue
-        fa, fb = (io.load_npz(feats_dir / r.with_suffix(".npz")) for r in rel)
+        fa, fb = (io.load_npz(feats_dir / r.with_suffix(".npz"), NPZ_ARRAYS) for r in rel)
         try:
             A, B = Features.from_arrays(fa), Features.from_arrays(fb)
             with st.timer("match"):

@@ -21,7 +21,7 @@ def homography_report(st: Stage) -> None:
     for q in pairs:
         f = Path(a.matches) / f"{q.name}.npz"
         if f.is_file():
-            m = io.load_npz(f)
+            m = io.load_npz(f, ("src", "size_a"))
             matched.append({"name": q.name, "matches": len(m["src"]), "size_a": m["size_a"].tolist(), "H": q.H})
     compared = homography.compare_methods(matched, runs, p.success_px)
     out, pictures = Path(a.out), []
@@ -30,7 +30,7 @@ def homography_report(st: Stage) -> None:
         estimates = {m: (r["pairs"][q.name]["H"] if q.name in r["pairs"] else None) for m, r in runs.items()}
         panels, caption = homography.picture_panels(compared, q.name, q.H, estimates)
         path = out / f"{q.name}.png"
-        io.save_image(path, homography.alignment_panel(img_a, img_b, panels, p.checker_tiles))
+        io.save_picture(path, homography.alignment_panel(img_a, img_b, panels, p.checker_tiles))
         pictures.append({"path": path.as_posix(), "caption": caption})
     st.write_report(homography.report_summary(compared, pictures, dropped), homography.metrics_of(compared),
                     homography.quality_plots(compared), dropped)

@@ -14,6 +14,16 @@ MAX_DRAWN = 60
 MAX_PICTURES = 12
 
 
+def _scaled(lines: list, f: float) -> np.ndarray:
+    """Lines ``[rho, theta, ...]`` of an image in the pixels of that image resized by ``f`` (pixel centres map as
+    in ``cv2.resize``: ``x' = (x + 0.5) f - 0.5``, so ``rho' = f (rho + h) - h`` with ``h = (cos + sin) / 2``)."""
+    out = np.array(lines, float)
+    if f != 1.0 and out.size:
+        h = (np.cos(out[:, 1]) + np.sin(out[:, 1])) / 2
+        out[:, 0] = f * (out[:, 0] + h) - h
+    return out
+
+
 def hough_report(st: Stage) -> None:
     p, a = st.params, st.args
     items, _ = datasets.find_hough(a.images)
@@ -25,11 +35,14 @@ def hough_report(st: Stage) -> None:
         lines[Path(i["file"]).stem]["opencv"] = i["lines"]
     pictures = []
     for it in st.progress([it for it in items if it.name in lines], "hough overlays"):
-        img = io.read_image(it.path, "color")
-        left = hough.draw_lines(img, np.asarray(lines[it.name]["ours"])[:MAX_DRAWN], (0, 0, 255))
-        right = hough.draw_lines(img, np.asarray(lines[it.name]["opencv"])[:MAX_DRAWN], (0, 255, 0))
+        full = io.read_image(it.path, "color")
+        img = io.fit_picture(full, io.PICTURE_MAX_PIXELS // 2)  # two panels side by side
+        f = img.shape[1] / full.shape[1]
+        del full
+        left = hough.draw_lines(img, _scaled(lines[it.name]["ours"][:MAX_DRAWN], f), (0, 0, 255))
+        right = hough.draw_lines(img, _scaled(lines[it.name]["opencv"][:MAX_DRAWN], f), (0, 255, 0))
         path = Path(a.overlays) / f"{it.name}.png"
-        io.save_image(path, np.hstack([left, right]))
+        io.save_picture(path, np.hstack([left, right]))
         pictures.append({"path": path.as_posix(), "caption": f"{it.name}: ours (red, left), OpenCV (green, right)"})
     dropped = io.load_json(Path(a.edges) / "dropped.json")
     st.write_report(hough.report_summary(compared, ours, opencv, pictures[:MAX_PICTURES], dropped),

@@ -26,7 +26,7 @@ def logo_report(st: Stage) -> None:
             continue
         img = logo.draw_confusion(logo.confusion([r["truth"] for r in lab], [r["brand"] for r in lab], brands),
                                    brands, f"{m}: truth (rows) vs decision")
-        io.save_image(out / f"confusion_{m}.png", img)
+        io.save_picture(out / f"confusion_{m}.png", img)
         pictures.append({"path": (out / f"confusion_{m}.png").as_posix(), "caption": f"{m}: confusion matrix on "
                          f"the {len(lab)} scenes with ground truth (rows = truth, columns = decision, last = none)"})
     best = logo.pick_method(decisions, vp.score_threshold, st.sections["logo.features"].detector)
@@ -36,7 +36,7 @@ def logo_report(st: Stage) -> None:
               and r not in shown][:MAX_WRONG]
     scenes = {sc.name: sc for sc in inputs.scenes}
     for r in st.progress(shown, "logo overlays"):
-        pairs = io.load_npz(Path(a.verify) / best / f"{r['scene']}.npz")
+        pairs = io.load_npz(Path(a.verify) / best / f"{r['scene']}.npz", ("gallery_xy", "scene_xy"))
         truth = f" (truth {r['truth'] or 'none'})" if r["labelled"] else ""
         caption = (f"{best}: {r['scene']} -> {r['brand'] or 'none'}{truth}, best {r['best_brand']} with "
                    f"{r['inliers']} inliers")
@@ -46,7 +46,7 @@ def logo_report(st: Stage) -> None:
                                    pairs["scene_xy"], None if r.get("truth_quad") is None else
                                    np.array(r["truth_quad"]), caption)
         path = out / f"overlay_{best}_{r['scene']}.png"
-        io.save_image(path, pic)
+        io.save_picture(path, pic)
         blue = "blue = true outline, " if r["labelled"] else ""
         pictures.append({"path": path.as_posix(), "caption": f"{caption}; green = found outline, {blue}orange = "
                          "inlier matches"})

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from cvpipe import datasets, io, logo
 from cvpipe.errors import CvpipeError, InputError
-from cvpipe.features import DETECTORS, Features
+from cvpipe.features import DETECTORS, NPZ_ARRAYS, Features
 from cvpipe.logo.cached import load_gallery
 from stages._runner import Stage, run
 
@@ -32,9 +32,10 @@ def logo_verify(st: Stage) -> None:
                 yield InputError("matched, but no longer in the scenes folder; rerun logo_match")
                 continue
             try:
-                arrays = io.load_npz(Path(a.features) / rel[name].with_suffix(".npz"))
+                arrays = io.load_npz(Path(a.features) / rel[name].with_suffix(".npz"), NPZ_ARRAYS)
                 scene, size = Features.from_arrays(arrays), tuple(int(v) for v in arrays["image_size"])
-                yield logo.Matches.from_arrays(io.load_npz(Path(a.matches) / f"{name}.npz")), scene, size
+                matches = io.load_npz(Path(a.matches) / f"{name}.npz", logo.Matches.ARRAYS)
+                yield logo.Matches.from_arrays(matches), scene, size
             except CvpipeError as exc:
                 yield exc
 

@@ -14,7 +14,8 @@ def panorama_homographies(st: Stage) -> None:
     recs = {}  # a set's graph travels with its task; its file names and sizes stay here for its record
 
     def set_data(name: str, _prev: dict):
-        arrays = io.load_npz(Path(st.args.matches) / f"{name}.npz")
+        arrays = io.load_npz(Path(st.args.matches) / f"{name}.npz", (*panorama.MatchGraph.ARRAYS, "files",
+                                                                         "full_sizes"))
         graph = panorama.MatchGraph.from_arrays(arrays)
         recs[name] = {"files": arrays["files"].tolist(), "work_sizes": graph.sizes,
                       "full_sizes": arrays["full_sizes"].tolist()}

@@ -15,7 +15,8 @@ def panorama_match(st: Stage) -> None:
 
     def set_data():
         for d in sets:
-            arrays = [io.load_npz(f) for f in sorted(d.glob("*.npz"))]
+            arrays = [io.load_npz(f, (*Features.ARRAYS, "image_file", "full_size", "work_size"))
+                      for f in sorted(d.glob("*.npz"))]
             meta[d.name] = ([str(a["image_file"]) for a in arrays], [a["full_size"] for a in arrays])
             yield [Features.from_arrays(a) for a in arrays], [tuple(int(v) for v in a["work_size"]) for a in arrays]
 

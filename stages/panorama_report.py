@@ -23,7 +23,7 @@ def _pictures(st: Stage, results: list[dict]) -> list[dict]:
         ours_img = io.read_image(Path(a.crop) / f"{name}.png") if ours["ok"] else None
         cv_img = io.read_image(Path(a.opencv) / f"{name}.png") if cv["ok"] else None
         path = Path(a.pictures) / f"{name}_side_by_side.png"
-        io.save_image(path, pr.side_by_side([ours_img, cv_img], PICTURE_HEIGHT))
+        io.save_picture(path, pr.side_by_side([ours_img, cv_img], PICTURE_HEIGHT))
         status = cv.get("status", "not run")
         pictures.append({"path": path.as_posix(),
                          "caption": f"{name}: ours (left, cropped) vs cv2.Stitcher (right, {status})"})
@@ -31,7 +31,7 @@ def _pictures(st: Stage, results: list[dict]) -> list[dict]:
             seams = io.read_image(Path(a.blend) / f"{name}_seams.png", "gray") > 0
             over = pr.overlay_seams(io.read_image(Path(a.blend) / f"{name}.png"), seams)
             path = Path(a.pictures) / f"{name}_seams.png"
-            io.save_image(path, pr.side_by_side([over], over.shape[0]))
+            io.save_picture(path, pr.side_by_side([over], over.shape[0]))
             pictures.append({"path": path.as_posix(), "caption": f"{name}: our seam lines (red)"})
     return pictures
 

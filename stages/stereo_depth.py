@@ -29,7 +29,7 @@ def stereo_depth(st: Stage) -> None:
         if geo is None:
             only.append(name)
             continue
-        disp = np.load(disparities / name / "disparity.npy", allow_pickle=False)
+        disp = io.load_npy(disparities / name / "disparity.npy", "disparity")
         try:
             z = depth.depth_from_disparity(disp, geo["focal"], geo["baseline"], geo["doffs"])
             left = io.read_image(rectified / name / "left.png")

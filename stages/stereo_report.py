@@ -5,8 +5,6 @@ the quality plots (bad-2.0 where there is truth, the valid fraction for every pa
 
 from pathlib import Path
 
-import numpy as np
-
 from cvpipe import datasets, io, stereo
 from stages._runner import REPORT_ARGS, Stage, run
 
@@ -25,9 +23,9 @@ def stereo_report(st: Stage) -> None:
     for pair in st.progress([q for q in pairs if q.name in rects], "stereo pictures"):
         rec, here = rects[pair.name], rectified / pair.name
         left, right = io.read_image(here / "left.png"), io.read_image(here / "right.png")
-        m = io.load_npz(here / "matches.npz")
+        m = io.load_npz(here / "matches.npz", ("left", "right"))
         path = out / f"{pair.name}_rectified.png"
-        io.save_image(path, stereo.rectification_picture(
+        io.save_picture(path, stereo.rectification_picture(
             io.read_image(pair.left), io.read_image(pair.right), left, right, rec["H_left"], rec["H_right"],
             m["left"], m["right"]))
         err = rec.get("vertical_error_median_px")
@@ -36,22 +34,22 @@ def stereo_report(st: Stage) -> None:
             f"{'n/a' if err is None else f'{err:.2f}'} px over {rec['vertical_error_over']} (top: original, "
             "bottom: rectified; a match's right point should lie on its line)")})
         if pair.name in depth_run["pairs"]:
-            z = np.load(depth_dir / pair.name / "depth.npy", allow_pickle=False)
+            z = io.load_npy(depth_dir / pair.name / "depth.npy", "depth")
             unit = depth_run["units"][pair.name]
             path = out / f"{pair.name}_depth.png"
-            io.save_image(path, stereo.depth_picture(left, z, unit))
+            io.save_picture(path, stereo.depth_picture(left, z, unit))
             extra.append({"path": path.as_posix(), "caption": (
                 f"{pair.name}: depth in {unit} from {depth_run['method']} (black = no depth); point cloud "
                 f"{(depth_dir / pair.name / 'cloud.ply').as_posix()}")})
         if not any(pair.name in r["pairs"] for r in runs.values()):
             continue
         max_disp = next(r["pairs"][pair.name]["max_disp"] for r in runs.values() if pair.name in r["pairs"])
-        disps = {m: (np.load(r["folder"] / pair.name / "disparity.npy", allow_pickle=False)
+        disps = {m: (io.load_npy(r["folder"] / pair.name / "disparity.npy", "disparity")
                      if pair.name in r["pairs"] else None) for m, r in runs.items()}
         in_frame = pair.truth is not None and rec["kind"] == "none"
         truth = datasets.read_stereo_truth(pair.truth, left.shape[:2]) if in_frame else None
         path = out / f"{pair.name}.png"
-        io.save_image(path, stereo.comparison_picture(left, disps, max_disp, truth, p.error_clip))
+        io.save_picture(path, stereo.comparison_picture(left, disps, max_disp, truth, p.error_clip))
         what = "top: left image and each method's disparity; bottom: true disparity and each method's |error|" \
             if truth is not None else "left image and each method's disparity (no ground truth" + \
             (" in the rectified frame)" if pair.truth is not None else ")")

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from cvpipe import datasets
+from cvpipe import datasets, io
 from cvpipe.errors import InputError
 
 PNG = bytes.fromhex("89504e470d0a1a0a")  # the finders list files by suffix and never decode them
@@ -58,8 +58,116 @@ def test_truth_is_attached_by_file_name(tmp_path):
      r"truth\.json: fields `sets\[0\]\.images` and `sets\[0\]\.H` must be lists of equal length$"),
     ("find_hough", ["a.png"], {"images": {"file": "a.png"}}, r"truth\.json: field `images` must be a list of records$"),
     ("find_hough", ["a.png"], {"images": [3]}, r"truth\.json: field `images\[0\]` must be an object$"),
+    # wrong types: each refused naming the field, never a TypeError from inside the finder
+    ("find_logo", ["gallery/acme.png", "scenes/s1.png"], {"scenes": [{"file": "s1.png", "brand": ["acme"]}]},
+     r"truth\.json: field `scenes\[0\]\.brand` must be a non-empty string or null, got \['acme'\]$"),
+    ("find_logo", ["gallery/acme.png", "scenes/s1.png"], {"scenes": [{"file": "s1.png", "brand": {"n": "acme"}}]},
+     r"truth\.json: field `scenes\[0\]\.brand` must be a non-empty string or null, got \{'n': 'acme'\}$"),
+    ("find_logo", ["gallery/acme.png", "scenes/s1.png"],
+     {"scenes": [{"file": "s1.png", "brand": "acme", "quad": [[0, 0], [9, 0], [9, "9"], [0, 9]]}]},
+     r"truth\.json: field `scenes\[0\]\.quad` must be finite numbers of shape \(4, 2\), got '9' at \[2\]\[1\]$"),
+    ("find_logo", ["gallery/acme.png", "scenes/s1.png"], {"scenes": [{"file": ["s1.png"], "brand": None}]},
+     r"truth\.json: field `scenes\[0\]\.file` must be a non-empty string, got \['s1\.png'\]$"),
+    ("find_hough", ["a.png"], {"images": [{"file": "a.png", "lines": [{"a": 1}, 1]}]},
+     r"truth\.json: field `images\[0\]\.lines` must be finite numbers of shape \(N, 2\), got \{'a': 1\} at \[0\]$"),
+    ("find_hough", ["a.png"], {"images": [{"file": "a.png", "lines": [[5.0, True]]}]},
+     r"truth\.json: field `images\[0\]\.lines` must be finite numbers of shape \(N, 2\), got True at \[0\]\[1\]$"),
+    ("find_hough", ["a.png"], {"images": [{"file": "a.png", "lines": [[5.0, 0.5], [1.0]]}]},
+     r"truth\.json: field `images\[0\]\.lines` must be finite numbers of shape \(N, 2\), got lists of unequal "
+     r"length$"),
+    ("find_hough", ["a.png"], {"images": [{"file": "a.png", "lines": [[5.0, 0.5], [1.0, float("nan")]]}]},
+     r"truth\.json: field `images\[0\]\.lines` must be finite numbers of shape \(N, 2\), got NaN or infinity at "
+     r"\[1\]\[1\]$"),
+    ("find_hough", ["a.png"], {"images": [{"file": "a.png", "lines": [[float("inf"), 0.5]]}]},
+     r"truth\.json: field `images\[0\]\.lines` must be finite numbers of shape \(N, 2\), got NaN or infinity at "
+     r"\[0\]\[0\]$"),
+    ("find_hough", ["a.png"], {"images": [{"file": "a.png", "lines": [[10 ** 400, 0.5]]}]},
+     r"truth\.json: field `images\[0\]\.lines` must be finite numbers of shape \(N, 2\), got a number too large "
+     r"for a float$"),
+    ("find_defect", ["reference.png", "probes/p1.png"],
+     {"probes": [{"file": "p1.png", "verdict": "faulty", "boxes": [[1, 2, 3]]}]},
+     r"truth\.json: field `probes\[0\]\.boxes` must be finite numbers of shape \(N, 4\), got shape \(1, 3\)$"),
+    ("find_defect", ["reference.png", "probes/p1.png"],
+     {"probes": [{"file": "p1.png", "verdict": "faulty", "boxes": [1, 2, 3]}]},
+     r"truth\.json: field `probes\[0\]\.boxes` must be finite numbers of shape \(N, 4\), got shape \(3,\)$"),
+    ("find_defect", ["reference.png", "probes/p1.png"],
+     {"probes": [{"file": "p1.png", "verdict": "faulty", "boxes": [[1, 2, float("-inf"), 4]]}]},
+     r"truth\.json: field `probes\[0\]\.boxes` must be finite numbers of shape \(N, 4\), got NaN or infinity at "
+     r"\[0\]\[2\]$"),
+    ("find_defect", ["reference.png", "probes/p1.png"], {"probes": [{"file": "p1.png", "verdict": ["faulty"]}]},
+     r"truth\.json: field `probes\[0\]\.verdict` must be 'faulty' or 'perfect', got \['faulty'\]$"),
+    ("find_homography", ["x_a.png", "x_b.png"], {"pairs": [{"name": {"x": 1}, "H": np.eye(3).tolist()}]},
+     r"truth\.json: field `pairs\[0\]\.name` must be a non-empty string, got \{'x': 1\}$"),
+    ("find_homography", ["x_a.png", "x_b.png"], {"pairs": [{"name": "x", "H": [[1, 0, 0], [0, 1, 0], [0, 0, None]]}]},
+     r"truth\.json: field `pairs\[0\]\.H` must be finite numbers of shape \(3, 3\), got None at \[2\]\[2\]$"),
+    ("find_panorama", ["s/a.png", "s/b.png"], {"sets": [{"name": "s", "images": [1], "H": [np.eye(3).tolist()]}]},
+     r"truth\.json: field `sets\[0\]\.images\[0\]` must be a non-empty string, got 1$"),
+    ("find_panorama", ["s/a.png", "s/b.png"], {"sets": [{"name": "s", "images": ["a.png"], "H": [[[1, 0, 0]]]}]},
+     r"truth\.json: field `sets\[0\]\.H\[0\]` must be finite numbers of shape \(3, 3\), got shape \(1, 3\)$"),
+    ("find_hough", ["a.png"], [{"file": "a.png"}], r"truth\.json: expected a JSON object, got \[\{'file': 'a\.png'\}\]$"),
+    ("find_stereo", ["left.png", "right.png"], ["max_disp", 64], r"truth\.json: expected a JSON object, got "
+     r"\['max_disp', 64\]$"),
 ])
 def test_malformed_truth_names_file_and_field(tmp_path, finder, files, truth, message):
     d = _layout(tmp_path, files, truth)
     with pytest.raises(InputError, match=message):
         getattr(datasets, finder)(d)
+
+
+def test_a_truth_file_is_read_with_a_size_limit(tmp_path, monkeypatch):
+    d = _layout(tmp_path, ["a.png"], {"images": [{"file": "a.png", "lines": [[5.0, 0.5]] * 20}]})
+    monkeypatch.setattr(datasets, "TRUTH_MAX_BYTES", 100)
+    with pytest.raises(InputError, match=r"truth\.json: the truth JSON file is larger than the limit of 100 bytes$"):
+        datasets.find_hough(d)
+
+
+@pytest.mark.parametrize("text, message", [
+    ('{"images": [{"file": "a.png", "lines": [[1e999, 0.5]]}]}',  # JSON's way to write an overflow: inf
+     r"truth\.json: field `images\[0\]\.lines` must be finite numbers of shape \(N, 2\), got NaN or infinity"),
+    ('{"images": [{"file": "a.png", "lines": [[NaN, 0.5]]}]}',
+     r"truth\.json: field `images\[0\]\.lines` must be finite numbers of shape \(N, 2\), got NaN or infinity"),
+    ('{"images": ' + "[" * 100_000 + "]" * 100_000 + "}",
+     r"truth\.json: not a usable truth JSON file \(lists or objects nested too deeply\)$"),
+])
+def test_truth_text_that_parses_to_no_usable_number_is_refused(tmp_path, text, message):
+    (tmp_path / "a.png").write_bytes(PNG)
+    (tmp_path / "truth.json").write_text(text)
+    with pytest.raises(InputError, match=message):
+        datasets.find_hough(tmp_path)
+
+
+def test_empty_lists_and_nulls_are_no_truth_lines_or_boxes(tmp_path):
+    d = _layout(tmp_path / "hough", ["a.png", "b.png"],
+                {"images": [{"file": "a.png", "lines": []}, {"file": "b.png", "lines": None}]})
+    items, _ = datasets.find_hough(d)
+    assert [it.truth_lines.shape for it in items] == [(0, 2), (0, 2)]
+    d = _layout(tmp_path / "defect", ["reference.png", "probes/p1.png", "probes/p2.png"],
+                {"probes": [{"file": "p1.png", "verdict": "perfect", "boxes": [], "H": None},
+                            {"file": "p2.png", "verdict": "perfect"}]})
+    inputs, _ = datasets.find_defect(d)
+    assert [(p.boxes.shape, p.H) for p in inputs.probes] == [((0, 4), None), ((0, 4), None)]
+
+
+def _stereo_truth(tmp_path, how):
+    path = tmp_path / "truth.npz"
+    if how == "cut off":
+        io.save_npz(path, disparity=np.ones((30, 40), np.float32))
+        path.write_bytes(path.read_bytes()[:-40])
+    elif how == "wrong keys":
+        io.save_npz(path, disp=np.ones((30, 40), np.float32))
+    elif how == "strings":
+        io.save_npz(path, disparity=np.full((30, 40), "x"))
+    elif how == "wrong shape":
+        io.save_npz(path, disparity=np.ones((40, 30), np.float32))
+    return path
+
+
+@pytest.mark.parametrize("how, message", [
+    ("cut off", r"truth\.npz: not a readable \.npz archive \(.*\); expected an \.npz holding `disparity`$"),
+    ("wrong keys", r"truth\.npz: missing array\(s\) `disparity`; expected an \.npz holding `disparity`$"),
+    ("strings", r"truth\.npz: array `disparity` must hold numbers \(pixels, NaN = unknown\), got dtype <U1$"),
+    ("wrong shape", r"truth\.npz: array `disparity` has shape \(40, 30\), the left image is \(30, 40\)$"),
+])
+def test_a_damaged_stereo_truth_npz_names_the_file_and_the_array(tmp_path, how, message):
+    with pytest.raises(InputError, match=message):
+        datasets.read_stereo_truth(_stereo_truth(tmp_path, how), (30, 40))

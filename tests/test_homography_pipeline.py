@@ -210,12 +210,57 @@ def test_stages_end_to_end_with_and_without_truth(tmp_path, pair_files):
     assert io.read_image(tmp_path / "report" / "p.png").shape[1] == 2 * 400
 
 
+def _stage_in_process(monkeypatch, cwd, module, *args):
+    """Run ``python -m stages.<module> ARGS`` in this process from ``cwd``; return its exit status."""
+    import runpy
+
+    (cwd / "params.yaml").write_text((ROOT / "params.yaml").read_text())
+    monkeypatch.chdir(cwd)
+    monkeypatch.setattr(sys, "argv", [f"stages.{module}", *args])
+    with pytest.raises(SystemExit) as exc:
+        runpy.run_module(f"stages.{module}", run_name="__main__")
+    return exc.value.code
+
+
+def test_a_cut_off_cached_npz_fails_the_stage_with_one_line_naming_it(tmp_path, monkeypatch, capsys):
+    io.save_npz(tmp_path / "m" / "p.npz", src=np.zeros((8, 2)), dst=np.zeros((8, 2)))
+    data = (tmp_path / "m" / "p.npz").read_bytes()
+    (tmp_path / "m" / "p.npz").write_bytes(data[:len(data) // 2])  # a copy or a disk cut short
+    assert _stage_in_process(monkeypatch, tmp_path, "homography_estimate", "--matches", "m", "--method", "ours",
+                             "--out", "est") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("homography_estimate@ours: error: m/p.npz: not a readable .npz archive")
+    assert err[0].endswith("; expected an .npz holding `src`, `dst`")
+    assert not (tmp_path / "est" / "estimates.json").exists()
+
+
+def test_cached_features_without_an_expected_array_fail_the_stage_naming_it(tmp_path, monkeypatch, capsys,
+                                                                            textured_image):
+    from cvpipe.features import NPZ_ARRAYS, detect_item
+    from cvpipe.params import FeaturesParams
+
+    arrays, _ = detect_item((textured_image, False), FeaturesParams())
+    (tmp_path / "images").mkdir()
+    for side in ("a", "b"):
+        cv2.imwrite(str(tmp_path / "images" / f"p_{side}.png"), textured_image)
+        io.save_npz(tmp_path / "feats" / f"p_{side}.npz", **arrays)
+    io.save_json(tmp_path / "feats" / "dropped.json", [])
+    io.save_npz(tmp_path / "feats" / "p_b.npz", **{k: v for k, v in arrays.items() if k != "detector"})
+    assert _stage_in_process(monkeypatch, tmp_path, "homography_match", "--images", "images", "--features", "feats",
+                             "--out", "m") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    expected = ", ".join(f"`{k}`" for k in NPZ_ARRAYS)
+    assert err == [f"homography_match: error: feats/p_b.npz: missing array(s) `detector`; expected an .npz holding "
+                   f"{expected}"]
+    assert not (tmp_path / "m").exists()
+
+
 def test_cli_and_bench_argument_checks(pair_files, capsys):
     a, b, _ = pair_files
     assert cli.main(["homography", str(a), str(b), "--max-features", "0"]) == 2
-    assert "`--max-features` must be >= 1" in capsys.readouterr().err
+    assert "`--max-features` must be in [1, 1000000], got 0" in capsys.readouterr().err
     assert cli.main(["homography", str(a), str(b), "--ratio", "1.5"]) == 2
-    assert "`--ratio` must be in (0, 1]" in capsys.readouterr().err
+    assert "`--ratio` must be in (0.0, 1.0], got 1.5" in capsys.readouterr().err
     assert cli.main(["bench", "homography", "--no-real", "--repeats", "0"]) == 2
     assert "`--repeats` must be >= 1" in capsys.readouterr().err
     assert cli.main(["bench", "homography", "--no-real", "--synthetic-trials", "0"]) == 2
@@ -223,11 +268,11 @@ def test_cli_and_bench_argument_checks(pair_files, capsys):
 
 
 @pytest.mark.parametrize("cls, mapping, message", [
-    ("HomographyEstimateParams", {"threshold": 0.0}, r"`homography\.x\.threshold` must be in \(0\.0, inf\]"),
+    ("HomographyEstimateParams", {"threshold": 0.0}, r"`homography\.x\.threshold` must be in \(0\.0, 100\.0\]"),
     ("HomographyEstimateParams", {"confidence": 1.0},
      r"`homography\.x\.confidence` must be in \(0\.0, 1\.0\), got 1\.0"),
     ("HomographyEstimateParams", {"max_iters": 0}, r"`homography\.x\.max_iters` must be in \[1, 10000000\]"),
-    ("HomographyReportParams", {"success_px": -1.0}, r"`homography\.x\.success_px` must be in \(0\.0, inf\]"),
+    ("HomographyReportParams", {"success_px": -1.0}, r"`homography\.x\.success_px` must be in \(0\.0, inf\)"),
     ("HomographyReportParams", {"checker_tiles": 0}, r"`homography\.x\.checker_tiles` must be in \[1, 256\]"),
 ])
 def test_homography_params_ranges(cls, mapping, message):

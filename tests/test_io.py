@@ -189,6 +189,75 @@ def test_npz_roundtrip_and_no_pickle(tmp_path):
         io.load_npz(tmp_path / "missing.npz")
 
 
+def _damaged_npz(tmp_path, how):
+    """An .npz written by save_npz (arrays `xy` and `detector`), then damaged as ``how`` says."""
+    path = tmp_path / "x.npz"
+    io.save_npz(path, xy=np.arange(4000, dtype=np.float32).reshape(-1, 2), detector=np.array("sift"))
+    data = path.read_bytes()
+    if how == "cut in half":
+        path.write_bytes(data[:len(data) // 2])
+    elif how == "last bytes cut":
+        path.write_bytes(data[:-10])
+    elif how == "empty":
+        path.write_bytes(b"")
+    elif how == "corrupted member":
+        path.write_bytes(data[:100] + bytes(b ^ 0xFF for b in data[100:120]) + data[120:])
+    elif how == "a bare .npy":
+        np.save(tmp_path / "y.npy", np.eye(2))
+        path.write_bytes((tmp_path / "y.npy").read_bytes())
+    elif how == "text":
+        path.write_text("xy,detector\n1,sift\n")
+    return path
+
+
+@pytest.mark.parametrize("how", ["cut in half", "last bytes cut", "empty", "corrupted member", "a bare .npy", "text"])
+def test_damaged_npz_is_one_line_naming_the_file_and_the_expected_arrays(tmp_path, how):
+    path = _damaged_npz(tmp_path, how)
+    with pytest.raises(InputError, match=r"x\.npz: .*; expected an \.npz holding `xy`, `detector`$") as exc:
+        io.load_npz(path, ("xy", "detector"))
+    assert "\n" not in str(exc.value) and exc.value.file == str(path)
+
+
+def test_npz_without_an_expected_array_names_the_missing_ones(tmp_path):
+    io.save_npz(tmp_path / "x.npz", xy=np.eye(2))
+    with pytest.raises(InputError, match=r"x\.npz: missing array\(s\) `detector`, `size`; expected an \.npz "
+                                         r"holding `xy`, `detector`, `size`$"):
+        io.load_npz(tmp_path / "x.npz", ("xy", "detector", "size"))
+    assert set(io.load_npz(tmp_path / "x.npz", ("xy",))) == {"xy"}
+    with pytest.raises(InputError, match=r"x\.npz: file is empty \(0 bytes\), expected an \.npz archive$"):
+        io.load_npz(_damaged_npz(tmp_path, "empty"))
+
+
+@pytest.mark.parametrize("damage, message", [
+    (lambda d: d[:len(d) // 2], r"d\.npy: not a readable \.npy disparity array \("),
+    (lambda d: b"", r"d\.npy: not a readable \.npy disparity array \("),
+    (lambda d: b"x" + d[1:], r"d\.npy: not a readable \.npy disparity array \("),
+])
+def test_damaged_npy_is_one_line_naming_the_file(tmp_path, damage, message):
+    path = tmp_path / "d.npy"
+    np.save(path, np.ones((30, 40), np.float32))
+    assert io.load_npy(path, "disparity").shape == (30, 40)
+    path.write_bytes(damage(path.read_bytes()))
+    with pytest.raises(InputError, match=message):
+        io.load_npy(path, "disparity")
+    io.save_npz(tmp_path / "z.npz", disparity=np.ones(3))
+    with pytest.raises(InputError, match=r"z\.npz: an \.npz archive, expected a single \.npy disparity array$"):
+        io.load_npy(tmp_path / "z.npz", "disparity")
+
+
+def test_json_size_limit_and_nesting_name_the_file(tmp_path):
+    path = tmp_path / "t.json"
+    path.write_text(json.dumps({"a": list(range(100))}))
+    with pytest.raises(InputError, match=r"t\.json: the truth JSON file is larger than the limit of 100 bytes$"):
+        io.load_json(path, 100, "truth JSON")
+    path.write_text("[" * 100_000 + "]" * 100_000)  # deeper than Python's parser recursion
+    with pytest.raises(InputError, match=r"t\.json: not a usable JSON file \(lists or objects nested too deeply\)$"):
+        io.load_json(path)
+    path.write_bytes(b'{"a": "\xff"}')
+    with pytest.raises(InputError, match=r"t\.json: not a UTF-8 JSON file \(byte 7 is 0xff\)$"):
+        io.load_json(path)
+
+
 def test_json_sorted_numpy_safe_and_errors(tmp_path):
     io.save_json(tmp_path / "m.json", {"b": np.float32(1.5), "a": np.arange(2), "c": float("nan")})
     text = (tmp_path / "m.json").read_text()
@@ -219,3 +288,31 @@ def test_save_image_roundtrip_and_bad_suffix(tmp_path, png):
     with pytest.raises(Exception):
         io.save_image(tmp_path / "x.unknownformat", img)
     assert not (tmp_path / "x.unknownformat").exists()
+
+
+# the overlay of a 9900 x 9900 input: two panels side by side, 196 megapixels, twice the read limit
+OVERLAY = (9900, 19800)
+
+
+def test_a_picture_of_the_pipeline_reads_back_under_the_read_limit(tmp_path):
+    big = np.zeros(OVERLAY, np.uint8)
+    big[4950, :] = 255  # one horizontal line across both panels
+    assert big.size > io.DEFAULT_MAX_PIXELS
+    io.save_picture(tmp_path / "overlay.png", big)
+    back = io.read_image(tmp_path / "overlay.png", "unchanged")  # the report reads pictures so, at the default limit
+    h, w = back.shape
+    assert w * h <= io.PICTURE_MAX_PIXELS < io.DEFAULT_MAX_PIXELS
+    assert abs(w / h - 2.0) < 2 / h  # the aspect ratio kept within a pixel's rounding
+    # area averaging: the 1-pixel line becomes a faint row near the middle, not lost
+    assert abs(int(back[:, w // 4].argmax()) - h // 2) <= 1 and back[:, w // 4].max() > 0
+
+
+def test_fit_picture_leaves_a_small_picture_alone_and_never_exceeds_the_limit():
+    small = np.zeros((30, 40, 3), np.uint8)
+    assert io.fit_picture(small) is small
+    for shape, limit in (((30, 40), 1200), ((30, 40), 1199), ((1, 50), 10), ((50, 1), 10), ((997, 13), 101)):
+        got = io.fit_picture(np.zeros(shape, np.uint8), limit)
+        assert got.shape[0] * got.shape[1] <= limit and min(got.shape) >= 1, (shape, limit, got.shape)
+    assert io.picture_scale(200, 100, 5000) == pytest.approx(0.5)
+    with pytest.raises(InputError, match=r"`max_pixels` must be an integer >= 1, got 0"):
+        io.fit_picture(small, 0)

@@ -206,6 +206,43 @@ def test_stage_renders_every_summary_and_the_timing_plot_data(tmp_path, monkeypa
     assert not list((tmp_path / "outputs").glob(".*tmp*"))  # the atomic writer left no temporary behind
 
 
+def test_a_task_report_draws_its_pictures_within_the_picture_limit(tmp_path, monkeypatch, repo_root):
+    """hough_report on an image whose two-panel overlay is over the picture limit (scaled down here, as a 9900 x
+    9900 input's 196-megapixel overlay is over the real one): the overlay is drawn shrunk, its lines where the
+    image's lines are, and the report stage reads it back."""
+    import runpy
+
+    import cv2
+    import numpy as np
+
+    monkeypatch.setattr(io, "PICTURE_MAX_PIXELS", 30_000)  # the 600 x 200 overlay is 120 000 pixels
+    img = np.zeros((200, 300), np.uint8)
+    img[100, :] = 255
+    (tmp_path / "images").mkdir()
+    cv2.imwrite(str(tmp_path / "images" / "big.png"), img)
+    io.save_json(tmp_path / "edges" / "dropped.json", [])
+    lines = {"impl": "x", "rho": 1.0, "theta": np.pi / 180, "threshold": 50, "refine": False,
+             "images": [{"file": "big.png", "lines": [[100.0, np.pi / 2, 300]]}]}
+    io.save_json(tmp_path / "ours.json", lines)
+    io.save_json(tmp_path / "opencv.json", lines)
+    (tmp_path / "params.yaml").write_text((repo_root / "params.yaml").read_text())
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "argv", [
+        "stages.hough_report", "--images", "images", "--edges", "edges", "--ours", "ours.json", "--opencv",
+        "opencv.json", "--overlays", "outputs/hough/overlays", "--metrics", "metrics.json", "--summary",
+        "outputs/hough/summary.json", "--plots", "plots"])
+    with pytest.raises(SystemExit) as exc:
+        runpy.run_module("stages.hough_report", run_name="__main__")
+    assert exc.value.code == 0
+    overlay = io.read_image(tmp_path / "outputs/hough/overlays/big.png")
+    assert overlay.shape == (100, 300, 3)  # each panel shrunk by 0.5 to 150 x 100
+    # the row y = 100 maps to (100 + 0.5) * 0.5 - 0.5 = 49.75: red (ours) on the left, green (OpenCV) on the right
+    assert abs(int(overlay[:, 40, 2].argmax()) - 49.75) <= 1 and abs(int(overlay[:, 190, 1].argmax()) - 49.75) <= 1
+    assert run_stage(monkeypatch, tmp_path) == 0
+    page = (tmp_path / "outputs/report.html").read_text(encoding="utf-8")
+    assert [(a["width"], a["height"]) for t, a in parse(page).tags if t == "img"] == [("300", "100")]
+
+
 def test_stage_with_no_summaries_lists_every_task_as_not_run(tmp_path, monkeypatch):
     assert run_stage(monkeypatch, tmp_path) == 0
     page = (tmp_path / "outputs/report.html").read_text(encoding="utf-8")

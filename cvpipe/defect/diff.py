@@ -40,10 +40,13 @@ class Difference:
     noise: float
     contrast: float
 
+    #: the arrays of :meth:`to_arrays` (before their prefix), the keys a cached ``.npz`` must hold for
+    #: :meth:`from_arrays`
+    ARRAYS = ("diff", "valid", "gain", "bias", "noise", "contrast")
+
     def to_arrays(self, prefix: str = "") -> dict[str, np.ndarray]:
         """Named arrays for ``io.save_npz``, each name prefixed by ``prefix``."""
-        return {prefix + k: np.asarray(getattr(self, k)) for k in ("diff", "valid", "gain", "bias", "noise",
-                                                                     "contrast")}
+        return {prefix + k: np.asarray(getattr(self, k)) for k in self.ARRAYS}
 
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray], prefix: str = "") -> "Difference":

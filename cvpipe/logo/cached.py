@@ -8,7 +8,7 @@ from pathlib import Path
 
 from .. import io
 from ..datasets import LogoInputs
-from ..features import Features
+from ..features import NPZ_ARRAYS, Features
 from ..params import LogoMatchParams
 from .gallery import Gallery, Reference, build_gallery
 
@@ -25,7 +25,7 @@ def features_of(features: Path, root: Path, image: Path, reasons: dict[str, str]
     rel = image.relative_to(root)
     f = features / rel.with_suffix(".npz")
     if f.is_file():
-        return io.load_npz(f)
+        return io.load_npz(f, NPZ_ARRAYS)
     return reasons.get(rel.as_posix(), reasons.get(image.name, "no features (logo_features did not process it)"))
 
 

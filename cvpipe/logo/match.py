@@ -35,6 +35,9 @@ class Matches:
     def __len__(self) -> int:
         return len(self.ref)
 
+    #: the arrays of :meth:`to_arrays`, the keys a cached ``.npz`` must hold for :meth:`from_arrays`
+    ARRAYS = ("ref", "gallery_idx", "scene_idx", "distance")
+
     def to_arrays(self) -> dict[str, np.ndarray]:
         return {"ref": self.ref, "gallery_idx": self.gallery_idx, "scene_idx": self.scene_idx,
                 "distance": self.distance}

@@ -59,6 +59,10 @@ class MatchGraph:
     edges: dict = field(default_factory=dict)
     rejected: dict = field(default_factory=dict)
 
+    #: the arrays of :meth:`to_arrays` every graph has (each edge adds ``edge_<i>_<j>_H``, ``_src``, ``_dst``), the
+    #: keys a cached ``.npz`` must hold for :meth:`from_arrays`
+    ARRAYS = ("sizes", "matches", "inliers", "confidence", "rejected")
+
     def to_arrays(self) -> dict[str, np.ndarray]:
         """Named arrays for ``io.save_npz``."""
         out = {"sizes": np.array(self.sizes, np.int64), "matches": self.matches, "inliers": self.inliers,
