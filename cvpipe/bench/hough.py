@@ -2,7 +2,7 @@
 
 (a) Parity and speed at identical parameters: the share of OpenCV's lines that ours reproduces in the same
 (rho, theta) cell, per image, and the time ratio ours / OpenCV measured in this process, interleaved, after warm-up
-(median over images). The one-off numba compile time is measured separately in a fresh process with an empty cache.
+(median over images).
 (b) Quality against the hand-labelled segments (stored 1-based, shifted to 0-based here): the recall of segments
 that a detected line lies along (both end points within 2 px of it, angle within 1 degree), for both standard
 transforms and both probabilistic ones (a segment must also be half covered by a detected segment).
@@ -16,12 +16,11 @@ import time
 import typing
 from pathlib import Path
 
-from . import fresh_cache_output
 from ..errors import InputError
 from ..params import HoughEdgesParams, HoughLinesParams
 
 if typing.TYPE_CHECKING:  # annotations only: the modules are imported inside the functions that use them,
-    # so that `cvpipe bench hough --help` imports neither numpy nor cv2 nor numba
+    # so that `cvpipe bench hough --help` imports neither numpy nor cv2
     import numpy as np
 
 
@@ -31,21 +30,6 @@ EXAMPLE = "cvpipe bench hough --data ../shared/data --json"
 #: the probabilistic transforms' parameters (same for ours and OpenCV's)
 PROB_THRESHOLD, PROB_MIN_LENGTH, PROB_MAX_GAP = 40, 25, 3
 
-_COMPILE_SNIPPET = """
-import time, numpy as np
-t0 = time.perf_counter()
-from cvpipe import hough
-e = np.zeros((40, 50), np.uint8); e[10, :] = 255; e[:, 7] = 255
-t1 = time.perf_counter()
-hough.hough_lines(e, threshold=5, parallel=False); hough.hough_lines(e, threshold=5, parallel=True)
-hough.hough_lines(e, threshold=5, refine=True)
-t2 = time.perf_counter()
-hough.hough_lines_probabilistic(e, threshold=5, rng=0)
-t3 = time.perf_counter()
-print(t2 - t1, t3 - t2, t1 - t0)
-"""
-
-
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     e, p = HoughEdgesParams(), HoughLinesParams()
     parser.add_argument("--data", default=os.environ.get("CVPIPE_DATA"),
@@ -54,7 +38,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--repeats", type=int, default=5, help="timed calls per image and method (median)")
     parser.add_argument("--threshold", type=int, default=p.threshold, help="standard transform vote threshold")
     parser.add_argument("--canny", type=float, nargs=2, default=(e.canny_low, e.canny_high), metavar=("LOW", "HIGH"))
-    parser.add_argument("--no-compile", action="store_true", help="skip the fresh-cache compile measurement")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
 
 
@@ -64,13 +47,6 @@ def _gt_segments(path: Path) -> np.ndarray:
     rows = [line.split() for line in path.read_text().splitlines() if line.strip() and not line.startswith("#")]
     seg = np.array([[float(v) for v in r[:4]] for r in rows], np.float64).reshape(-1, 4)
     return seg - 1.0  # MATLAB 1-based -> 0-based pixel coordinates
-
-
-def _compile_seconds() -> dict:
-    """Compile times of the numba kernels in a fresh interpreter with an empty cache."""
-    out = fresh_cache_output(_COMPILE_SNIPPET)
-    return {"standard_compile_s": float(out[0]), "probabilistic_compile_s": float(out[1]),
-            "import_s": float(out[2])}
 
 
 def _timed(fn) -> float:
@@ -97,12 +73,6 @@ def run(args: argparse.Namespace) -> int:
         images = images[:args.limit]
     p, e = HoughLinesParams(), HoughEdgesParams()
     (rho, theta), thr = hough.hough_steps(p), args.threshold
-
-    compile_info = {} if args.no_compile else _compile_seconds()
-    probe = np.zeros((30, 30), np.uint8)
-    first_call = _timed(lambda: hough.hough_lines(probe, rho, theta, 5, parallel=False))
-    first_call += _timed(lambda: hough.hough_lines(probe, rho, theta, 5, parallel=True))
-
     methods = {
         "ours": lambda ed: hough.hough_lines(ed, rho, theta, thr),
         "ours_serial": lambda ed: hough.hough_lines(ed, rho, theta, thr, parallel=False),
@@ -155,7 +125,6 @@ def run(args: argparse.Namespace) -> int:
         "time_ratio_serial_median": float(np.median([r["ratio_serial"] for r in rows])),
         "time_ratio_parallel_median": float(np.median([r["ratio_parallel"] for r in rows])),
         "ms_median": {k: 1e3 * float(np.median([r["seconds"][k] for r in rows])) for k in methods},
-        "first_call_s": first_call, **compile_info,
         "recall": {k: float(np.concatenate(v).mean()) for k, v in hits.items()},
         "gt_segments": int(sum(len(h) for h in hits["ours"])),
         "detections_per_image_median": {k: float(np.median(v)) for k, v in counts.items()},
@@ -175,9 +144,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"time ours/cv2 (median over images): {s['time_ratio_median']:.3f} (auto), serial "
           f"{s['time_ratio_serial_median']:.3f}, parallel {s['time_ratio_parallel_median']:.3f}; median ms "
           + ", ".join(f"{k} {v:.2f}" for k, v in s["ms_median"].items()))
-    if compile_info:
-        print(f"one-off numba compile (fresh cache): standard {s['standard_compile_s']:.1f} s, probabilistic "
-              f"{s['probabilistic_compile_s']:.1f} s; first call with the cache: {s['first_call_s']:.2f} s")
     print(f"recall of {s['gt_segments']} GT segments (2 px, 1 deg): "
           + ", ".join(f"{k} {v:.3f}" for k, v in s["recall"].items()))
     print("detections per image (median): " + ", ".join(f"{k} {v:.0f}" for k, v in

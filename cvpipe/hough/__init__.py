@@ -7,8 +7,8 @@
 - :mod:`~cvpipe.hough.probabilistic`: our progressive probabilistic transform (``hough_lines_probabilistic``);
 - :mod:`~cvpipe.hough.evaluate`: agreement with OpenCV and with ground truth (``cell_agreement``, ``compare_runs``);
 - :mod:`~cvpipe.hough.report`: pictures and the report page (``draw_lines``, ``report_summary``);
-- :mod:`~cvpipe.hough._kernels`: the numba kernels, imported only when a transform of ours runs, so that importing
-  this package (or ``cvpipe hough --method opencv``) does not import numba.
+- :mod:`~cvpipe.hough._vote`: the compiled kernels of our transforms (edge points, vote, peaks, refinement, the
+  probabilistic transform).
 """
 
 from .edges import canny_edges, edges_of

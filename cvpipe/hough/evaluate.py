@@ -310,8 +310,8 @@ def lines_item(edges: np.ndarray, shared: tuple) -> tuple[np.ndarray, float, flo
     Returns
     -------
     (lines, first, median)
-        The (N, 3) ``[rho, theta, votes]`` rows, the seconds of the first call (numba cache load included on a
-        fresh worker) and the median seconds over ``repeats`` further calls (:func:`median_seconds`).
+        The (N, 3) ``[rho, theta, votes]`` rows, the seconds of the first call (a fresh worker's one-off costs
+        included) and the median seconds over ``repeats`` further calls (:func:`median_seconds`).
     """
     from .transform import detect_lines
 

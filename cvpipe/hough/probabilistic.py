@@ -12,6 +12,7 @@ import numpy as np
 
 from ..errors import InputError, check_int
 from ..params import HoughLinesParams
+from . import _vote
 from .transform import _check_edges, hough_grid, hough_steps
 
 __all__ = ["hough_lines_probabilistic"]
@@ -72,7 +73,5 @@ def hough_lines_probabilistic(
     rng = np.random.default_rng(rng)
     npts = int(np.count_nonzero(edges))
     order = rng.permutation(npts).astype(np.int64)
-    from . import _kernels  # numba only once a transform runs
-
-    return _kernels._ppht(edges, order, grid.tab_cos, grid.tab_sin, grid.numrho, threshold,
-                          float(min_line_length), int(math.floor(max_line_gap)), min(max_lines, max(npts, 1)))
+    return _vote.ppht(edges, order, grid.tab_cos, grid.tab_sin, grid.numrho, threshold, float(min_line_length),
+                      int(math.floor(max_line_gap)), min(max_lines, max(npts, 1)))

@@ -15,10 +15,12 @@
 - output ``rho = (r - (numrho - 1) // 2) * rho`` and ``theta = min_theta + n * theta`` in float32. The integer
   division is OpenCV >= 4.13 / 5.0 (PR #27992); before it, the centre was ``(numrho - 1) * 0.5``.
 
-The voting kernels (:mod:`cvpipe.hough._kernels`, numba with cached compilation, imported on the first vote): per
-angle, the rho bins of all edge pixels are computed in one vectorised pass, then counted into four interleaved
-histograms (so consecutive increments of the same bin do not wait on each other). Blocks of angles run on parallel
-threads when a core is free; each thread owns whole accumulator rows, so there are no write races.
+The voting kernel (:mod:`cvpipe.hough._vote`, compiled Cython): the edge pixels are first paired with an
+8-neighbour where they have one; per angle, the rho bins of all pixels are computed in one vectorised pass, and each
+pair is counted with one histogram increment (by the difference of its two bins, at most 2) and each single pixel
+with one, into two copies of each histogram used alternately (so consecutive increments of the same bin do not wait
+on each other); the accumulator row is summed from them. Blocks of angles run on parallel OpenMP threads when a core
+is free; each thread owns whole accumulator rows, so there are no write races.
 """
 
 from __future__ import annotations
@@ -32,8 +34,10 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .._threads import max_threads
 from ..errors import InputError, check_int, check_memory
 from ..params import HoughLinesParams, section_or_default
+from . import _vote
 
 __all__ = ["HoughGrid", "hough_grid", "hough_accumulator", "hough_lines", "hough_lines_opencv", "IMPLEMENTATIONS",
            "get_impl", "hough_steps", "detect_lines"]
@@ -180,32 +184,29 @@ def _grid(h: int, w: int, rho: float, theta: float, min_theta: float, max_theta:
 # ------------------------------------------------------------------------------------------------- standard
 
 
-#: fewer votes than this (edge pixels x angles) are cast on one thread. On 2 cores (numba's OpenMP layer with
-#: passive waiting, see :mod:`cvpipe`; idle machine, best of 51 calls) a parallel region costs about 0.06 ms to start:
-#: both threads break even with one at 0.2-0.4M votes and take 0.83x its time at 0.5M (the samples' drawings), 0.58x
-#: at 2M and 0.52x at 6.5M (York Urban photos: 1.5-13M)
-_PARALLEL_MIN_VOTES = 400_000
+#: fewer votes than this (edge pixels x angles) are cast on one thread. On 2 cores (OpenMP with passive waiting, see
+#: :mod:`cvpipe`; random line drawings in 300 x 300 and 640 x 480, best of 81 calls, load average 1.4-1.5) both
+#: threads break even with one at 0.2M votes and take 0.65-0.87x its time at 0.37-0.55M (the samples' drawings:
+#: 0.5M), 0.64-0.74x at 0.9-1M (York Urban photos: 1.5-13M)
+_PARALLEL_MIN_VOTES = 250_000
 
 
-def _use_parallel(parallel: bool | None, votes: int | None = None) -> bool:
-    """Resolve ``parallel=None``: vote in parallel only for enough ``votes`` and when the machine has a core to spare.
+def _use_parallel(parallel: bool | None) -> bool:
+    """Resolve ``parallel=None``: vote in parallel only when the machine has a core to spare (and, decided by the
+    kernel, for at least ``_PARALLEL_MIN_VOTES`` votes).
 
     On a machine whose cores are busy with other work, a parallel vote waits at its barrier for a descheduled thread
     and is slower than one thread; the 1-minute load average is the cheap signal for that.
     """
     if parallel is not None:
         return bool(parallel)
-    if votes is not None and votes < _PARALLEL_MIN_VOTES:
-        return False
     now = time.monotonic()
     if now - _AUTO_PARALLEL[0] > 1.0:  # asking costs ~0.1 ms, so at most once a second
         try:
             spare = os.getloadavg()[0] <= (os.cpu_count() or 1) - 0.5
         except OSError:  # pragma: no cover - platforms without a load average
             spare = True
-        import numba  # only the vote asks, and it imports numba anyway
-
-        _AUTO_PARALLEL[:] = [now, spare and numba.get_num_threads() >= 2]
+        _AUTO_PARALLEL[:] = [now, spare and max_threads() >= 2]
     return bool(_AUTO_PARALLEL[1])
 
 
@@ -223,7 +224,7 @@ def hough_accumulator(edges: np.ndarray, grid: HoughGrid, parallel: bool | None 
     grid : HoughGrid
         From ``hough_grid(edges.shape, ...)``.
     parallel : bool or None
-        True votes blocks of angles on all numba threads, False on one thread (faster when the cores are busy),
+        True votes blocks of angles on all OpenMP threads, False on one thread (faster when the cores are busy),
         None picks parallel when the load average leaves a core free. The accumulator is the same either way.
 
     Returns
@@ -241,16 +242,10 @@ def hough_accumulator(edges: np.ndarray, grid: HoughGrid, parallel: bool | None 
     >>> int(acc[90 + 1, grid.center + 20 + 1])  # angle 90, rho 20, behind the one-cell border
     80
     """
-    import numba
-
-    from . import _kernels  # here, not at the top: the OpenCV baseline never imports numba
-
     edges = _check_edges(edges)
-    xs, ys = _kernels._edge_points(edges)
-    threads = numba.get_num_threads() if _use_parallel(parallel, len(xs) * len(grid.tab_cos)) else 1
-    if threads > 1:
-        return _kernels._vote_parallel(xs, ys, grid.tab_cos, grid.tab_sin, grid.numrho, threads)
-    return _kernels._vote_serial(xs, ys, grid.tab_cos, grid.tab_sin, grid.numrho)
+    threads = max_threads() if _use_parallel(parallel) else 1
+    min_votes = _PARALLEL_MIN_VOTES if parallel is None else 0
+    return _vote.vote(edges, grid.tab_cos, grid.tab_sin, grid.numrho, threads, min_votes)
 
 
 def hough_lines(
@@ -286,8 +281,8 @@ def hough_lines(
         max(1.5, rho) px of it (two rounds; votes unchanged). Sub-bin accurate, but no longer the cell centres that
         ``cv2.HoughLines`` reports; theta stays in [0, pi).
     parallel : bool or None
-        Vote on all numba threads (``numba.set_num_threads`` limits them), on one (False), or decide from the load
-        average (None). The result is the same.
+        Vote on all OpenMP threads (``OMP_NUM_THREADS`` or :func:`cvpipe._threads.set_max_threads` limits them), on
+        one (False), or decide from the load average (None). The result is the same.
 
     Returns
     -------
@@ -309,17 +304,15 @@ def hough_lines(
         max_lines = check_int("max_lines", max_lines, 1)
     grid = hough_grid(edges.shape, rho, theta, min_theta, max_theta)
     acc = hough_accumulator(edges, grid, parallel)
-    from . import _kernels
-
-    ns, rs, votes = _kernels._peaks(acc, threshold)
+    ns, rs, votes = _vote.peaks(acc, threshold)
     if max_lines is not None:
         ns, rs, votes = ns[:max_lines], rs[:max_lines], votes[:max_lines]
     rho_out, theta_out = grid.rhos(rs), grid.thetas(ns)
     if refine and len(ns):
-        xs, ys = _kernels._edge_points(edges)
+        xs, ys = _vote.edge_points(edges)
         band = max(1.5, grid.rho)
-        rho_out, theta_out = _kernels._refine_fit(xs.astype(np.float64), ys.astype(np.float64),
-                                                  rho_out.astype(np.float64), theta_out.astype(np.float64), band, 2)
+        rho_out, theta_out = _vote.refine_fit(xs.astype(np.float64), ys.astype(np.float64),
+                                              rho_out.astype(np.float64), theta_out.astype(np.float64), band, 2)
     out = np.empty((len(votes), 3), np.float64)
     out[:, 0] = rho_out
     out[:, 1] = theta_out
