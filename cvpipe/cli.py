@@ -18,6 +18,7 @@ import importlib.util
 import io
 import json
 import os
+import re
 import sys
 import warnings
 from types import ModuleType
@@ -169,8 +170,8 @@ def _interrupted(exc: BaseException) -> bool:
 
 def _classify(exc: BaseException) -> tuple[str, str | None, int]:
     """(one-line message, file or None, exit status) for an exception that ended a command."""
-    if _interrupted(exc):
-        return "interrupted", None, 130
+    if _interrupted(exc):  # a Ctrl-C or a SIGTERM (cvpipe.interrupt): its word and its exit status
+        return interrupt.reason(), None, interrupt.status()
     if isinstance(exc, CvpipeError):
         return str(exc), exc.file, exc.exit_code
     if isinstance(exc, MemoryError):
@@ -225,9 +226,14 @@ def _unraisable(hook):
     return on_unraisable
 
 
+#: a terminal control sequence (colours, bold): ESC [ parameters letter
+_ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]")
+
+
 def _fail(message: str, file: str | None, code: int, json_mode: bool) -> int:
     """Print the one stderr line and, in ``--json`` mode, the one JSON record; return the exit status."""
-    line = " ".join(str(message).split()) or "failed"  # one line, whatever the message holds
+    # one line of plain text, whatever the message holds (a library's message may carry terminal colour codes)
+    line = " ".join(_ANSI.sub("", str(message)).split()) or "failed"
     print(f"cvpipe: error: {line}", file=sys.stderr)
     if json_mode:
         print(json.dumps({"error": line, "file": file, "exit": code}, sort_keys=True))
@@ -252,6 +258,8 @@ def _parse(parser: argparse.ArgumentParser, argv: list[str] | None, json_mode: b
         prog, sep, msg = last.partition(": error: ")
         where = prog.split(" ", 1)[1] if sep and " " in prog else ""
         msg = msg if sep else last
+        # a value refused by the parameter a flag sets (cvpipe.commands.param_type): "`--seed` must be in ..."
+        msg = re.sub(r"^argument (\S+): must ", r"`\1` must ", msg)
         hint = f" (see cvpipe {where + ' ' if where else ''}--help)"
         return None, _fail(f"{where + ': ' if where else ''}{msg}{hint}", None, code, json_mode)
 
@@ -261,7 +269,8 @@ def main(argv: list[str] | None = None) -> int:
 
     Exit status: 0 success, 1 no result (:class:`~cvpipe.errors.EstimationError`, an unexpected failure), 2 bad
     input or arguments (:class:`~cvpipe.errors.InputError`, a missing or unreadable file, out of memory), 130
-    interrupted (Ctrl-C, also during a compiled extension's call). ``CVPIPE_DEBUG=1`` re-raises for a traceback.
+    interrupted (Ctrl-C, also during a compiled extension's call), 143 terminated (SIGTERM, handled as a Ctrl-C;
+    :mod:`cvpipe.interrupt`). ``CVPIPE_DEBUG=1`` re-raises for a traceback.
     """
     args_list = sys.argv[1:] if argv is None else list(argv)
     json_mode = "--json" in args_list
@@ -290,8 +299,8 @@ def main(argv: list[str] | None = None) -> int:
                 os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             return 141
         message, file, code = _classify(exc)
-        if code == 130:
-            interrupt.ignore()  # ending now: a further Ctrl-C must not add a second line
+        if _interrupted(exc):
+            interrupt.ignore()  # ending now: a further signal must not add a second line
         return _fail(message, file, code, json_mode)
     finally:
         warnings.showwarning = shown
@@ -299,5 +308,5 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":  # ``python -m cvpipe.cli``: the program, with its Ctrl-C handling (as cvpipe._entry)
-    interrupt.install(record=interrupt.JSON_RECORD if "--json" in sys.argv[1:] else None)
+    interrupt.install(record="--json" in sys.argv[1:])
     sys.exit(interrupt.run(main))

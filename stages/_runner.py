@@ -15,9 +15,9 @@ live in ``dvc.yaml``'s ``cmd``, except a user's data folder, which ``cmd`` names
 hough.data``, so that no value of ``params.yaml`` ever reaches the shell), loads and validates the stage's
 ``params.yaml`` section(s), shows progress on stderr when it is a terminal, turns a bad input or parameter into one
 line ``<stage>: error: ...`` naming the file or key (exit 2; 1 when the algorithm could not produce a result; 130 on
-Ctrl-C) with no traceback, prints one summary line (what the stage made, what it dropped and why) and writes the
-stage's timings to ``outputs/timings/<stage>.json``. Timings are never part of a cached output: a rerun that gives
-the same results leaves every DVC hash unchanged, so the stages after it stay up to date.
+Ctrl-C, 143 on SIGTERM) with no traceback, prints one summary line (what the stage made, what it dropped and why)
+and writes the stage's timings to ``outputs/timings/<stage>.json``. Timings are never part of a cached output: a
+rerun that gives the same results leaves every DVC hash unchanged, so the stages after it stay up to date.
 """
 
 from __future__ import annotations
@@ -360,20 +360,20 @@ def run(fn: Callable[[Stage], Any], *, section: str | Sequence[str] | None = Non
     item : str, optional
         For a matrix stage, the option whose value completes the name (``hough_lines@ours``).
     argv : list of str, optional
-        The arguments (default ``sys.argv[1:]``). Without them the stage is the program, and takes over Ctrl-C
-        (:mod:`cvpipe.interrupt`): the first one ends the stage between items and steps with exit 130 and the one
-        line ``<stage>: error: interrupted``, a second one at once.
+        The arguments (default ``sys.argv[1:]``). Without them the stage is the program, and takes over Ctrl-C and
+        SIGTERM (:mod:`cvpipe.interrupt`): the first one ends the stage between items and steps with exit 130 and
+        the one line ``<stage>: error: interrupted`` (143 and ``terminated`` for a SIGTERM), a second one at once.
     """
     stage_name = name or fn.__name__
     program = argv is None  # run as `python -m stages.<name>`: this process's Ctrl-C is the stage's
     if program:
-        interrupt.install(line=f"{stage_name}: error: interrupted")
+        interrupt.install(name=stage_name)
     doc = sys.modules[fn.__module__].__doc__ or ""
     ns = _parser(doc, args, options or {}).parse_args(argv)
     if item is not None:
         stage_name = f"{stage_name}@{getattr(ns, item)}"
         if program:
-            interrupt.install(line=f"{stage_name}: error: interrupted")
+            interrupt.install(name=stage_name)
     st = Stage(name=stage_name, args=ns)
     status = 0
     t0 = time.perf_counter()
@@ -393,9 +393,9 @@ def run(fn: Callable[[Stage], Any], *, section: str | Sequence[str] | None = Non
         status = 2
         print(f"{stage_name}: error: {exc}", file=sys.stderr)
     except KeyboardInterrupt:
-        interrupt.ignore()  # ending now: a further Ctrl-C must not add a second line
-        status = 130
-        print(f"{stage_name}: error: interrupted", file=sys.stderr)
+        interrupt.ignore()  # ending now: a further signal must not add a second line
+        status = interrupt.status()  # 130, or 143 after a SIGTERM
+        print(f"{stage_name}: error: {interrupt.reason()}", file=sys.stderr)
     if status == 0:
         st.timings["total"] = time.perf_counter() - t0
         _write_timings(st)

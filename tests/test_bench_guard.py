@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 
 import pytest
@@ -106,3 +107,36 @@ def test_time_before_a_step_is_read_from_its_line_and_a_missing_line_fails():
         guard._before_step([sys.executable, "-c", "pass"], guard._STITCH_STEP, 1)
     with pytest.raises(InputError, match="exit 3"):
         guard._before_step([sys.executable, "-c", say + "; sys.exit(3)"], guard._STITCH_STEP, 1)
+
+
+@pytest.mark.parametrize("source", ["/dev/zero", "folder", "large", "binary"])
+def test_the_limits_file_is_a_small_regular_text_file(tmp_path, source):
+    """A limits file is read with a size cap: `/dev/zero` is refused at once (it was read for 41 s, up to 6.8 GB)."""
+    path = {"/dev/zero": "/dev/zero", "folder": str(tmp_path)}.get(source, str(tmp_path / "limits.txt"))
+    if source == "large":
+        (tmp_path / "limits.txt").write_text("row 1.0 why\n" * 200_000)  # 2.4 MB
+    elif source == "binary":
+        (tmp_path / "limits.txt").write_bytes(b"row 1.0 why\n\0\xff")
+    expected = {"/dev/zero": "not a regular file", "folder": "is a folder", "large": "larger than the limit of",
+                "binary": "NUL bytes"}[source]
+    with pytest.raises(InputError, match=r"^" + re.escape(path) + ": .*" + expected):
+        guard.read_limits(path)
+
+
+def test_limits_and_output_are_checked_before_any_row_runs(tmp_path, capsys, monkeypatch):
+    """A bad --limits or an --out that cannot be written is refused before the measuring starts."""
+    from cvpipe import cli
+
+    monkeypatch.setitem(guard.GROUPS, "a", lambda ctx: pytest.fail("a row ran before the arguments were checked"))
+    (tmp_path / "samples" / "hough").mkdir(parents=True)
+    limits = tmp_path / "limits.txt"
+    limits.write_text("a 1.0 why\n")
+    folder = tmp_path / "out"
+    folder.mkdir()
+    base = ["bench", "guard", "--samples", str(tmp_path / "samples"), "--rows", "a"]
+    for extra, expected in ((["--limits", "/dev/zero"], "/dev/zero: "),
+                            (["--limits", str(limits), "--out", str(folder)], f"{folder}: --out is a folder")):
+        assert cli.main([*base, *extra]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(f"cvpipe: error: {expected}"), err
+    assert list(folder.iterdir()) == []

@@ -95,3 +95,17 @@ def test_missing_folder_is_one_error_line(tmp_path, capsys):
     code = cli.main(["bench", "report", "--dir", str(tmp_path / "nope"), "--out", str(tmp_path / "B.md")])
     assert code == 2
     assert "no such folder" in capsys.readouterr().err
+
+
+def test_a_folder_without_results_is_refused_and_nothing_written(tmp_path, capsys):
+    """An empty (or mistyped) --dir would render a page of "not measured" lines over the real one."""
+    folder = tmp_path / "empty"
+    folder.mkdir()
+    (folder / "notes.txt").write_text("not a result")
+    out = tmp_path / "BENCHMARKS.md"
+    out.write_text("the real page\n")
+    assert cli.main(["bench", "report", "--dir", str(folder), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"cvpipe: error: --dir {folder}: no benchmark results (*.json) in this folder"], err
+    assert out.read_text() == "the real page\n" and sorted(p.name for p in tmp_path.iterdir()) == [
+        "BENCHMARKS.md", "empty"]

@@ -130,6 +130,18 @@ def test_unexpected_exception_is_one_line_exit_1(capsys, monkeypatch, views):
     assert code == 1 and "ZeroDivisionError" in only_error_line(lines) and doc["exit"] == 1
 
 
+def test_terminal_colour_codes_of_a_library_message_are_dropped(capsys, monkeypatch, views):
+    """A library error coloured for a terminal (numba's TypingError was) is plain text in the line and the record."""
+    def coloured(*a, **k):
+        raise TypeError("\x1b[1m\x1b[1mNo implementation of function\x1b[0m\n\x1b[0m\x1b[1m(int64)\x1b[0m")
+
+    monkeypatch.setattr(hough, "edges_of", coloured)
+    code, lines, doc = run_main(capsys, ["hough", views["a"], "--json"])
+    line = only_error_line(lines)
+    assert code == 1 and "\x1b" not in line and "No implementation of function (int64)" in line, line
+    assert doc["error"] == line.removeprefix("cvpipe: error: ")
+
+
 # ------------------------------------------------------------------------------------------------------ Ctrl-C
 
 
@@ -353,15 +365,19 @@ def test_ctrl_c_at_any_moment_of_parallel_stereo(tmp_path):
     assert interrupted >= runs // 4, interrupted
 
 
-def test_first_ctrl_c_is_recorded_and_the_second_ends_the_process_at_once(tmp_path):
-    """The handler never raises: after the first SIGINT the work goes on until it checks, and check() raises there;
-    a second SIGINT prints the one line (and the record) and ends the process with 130 at once."""
+@pytest.mark.parametrize("first, second, word, code", [
+    ("SIGINT", "SIGINT", "interrupted", 130), ("SIGTERM", "SIGTERM", "terminated", 143),
+    ("SIGTERM", "SIGINT", "terminated", 143)])  # the first signal sets the words and the status
+def test_first_ctrl_c_is_recorded_and_the_second_ends_the_process_at_once(tmp_path, first, second, word, code):
+    """The handler never raises: after the first SIGINT (or SIGTERM) the work goes on until it checks, and check()
+    raises there; a second signal prints the one line (and the record) and ends the process at once, with 130 after
+    a SIGINT and 143 after a SIGTERM."""
     script = tmp_path / "twice.py"
-    script.write_text(textwrap.dedent("""
+    script.write_text(textwrap.dedent(f"""
         import os, signal, sys, time
         from cvpipe import interrupt
-        assert interrupt.install(record='{"error": "interrupted"}')
-        os.kill(os.getpid(), signal.SIGINT)
+        assert interrupt.install(record=True)
+        os.kill(os.getpid(), signal.{first})
         t0 = time.monotonic()
         while time.monotonic() - t0 < 0.3:  # ordinary work: nothing is raised into it
             sum(range(100))
@@ -371,15 +387,16 @@ def test_first_ctrl_c_is_recorded_and_the_second_ends_the_process_at_once(tmp_pa
             sys.exit("check() did not raise")
         except KeyboardInterrupt:
             pass
-        os.kill(os.getpid(), signal.SIGINT)
+        os.kill(os.getpid(), signal.{second})
         time.sleep(5)
-        sys.exit("the second SIGINT did not end the process")
+        sys.exit("the second signal did not end the process")
     """))
     t0 = time.monotonic()
     proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=ENV, timeout=120)
-    assert proc.returncode == 130, proc.stderr
-    assert proc.stderr == "cvpipe: error: interrupted\n" and proc.stdout == '{"error": "interrupted"}\n'
-    # "at once": the script would sleep 5 s after the second SIGINT; start-up takes well under a second
+    assert proc.returncode == code, proc.stderr
+    assert proc.stderr == f"cvpipe: error: {word}\n"
+    assert proc.stdout == f'{{"error": "{word}", "exit": {code}, "file": null}}\n'
+    # "at once": the script would sleep 5 s after the second signal; start-up takes well under a second
     assert time.monotonic() - t0 < 5
 
 
@@ -391,7 +408,7 @@ def test_ctrl_c_while_the_results_go_out_leaves_them_whole_and_ends_with_130(tmp
         import os, signal, sys
         from cvpipe import interrupt
         from cvpipe.commands import final_output
-        assert interrupt.install(record='{"error": "interrupted"}')
+        assert interrupt.install(record=True)
         final_output()
         os.kill(os.getpid(), signal.SIGINT)
         interrupt.check()  # does not raise: the results are going out
@@ -442,11 +459,13 @@ def test_ctrl_c_when_sigint_is_ignored_changes_nothing(tmp_path):
     assert proc.stdout.split() == ["False", "True"], proc.stderr
 
 
-def test_stage_interrupted_between_items_is_one_line_exit_130(tmp_path):
-    """A stage run as a program (the shared runner): a Ctrl-C during an item ends the stage before the next one,
-    with exit 130 and the line `<stage>: error: interrupted`, and writes no summary or timings."""
+@pytest.mark.parametrize("sig, word, code", [("SIGINT", "interrupted", 130), ("SIGTERM", "terminated", 143)])
+def test_stage_interrupted_between_items_is_one_line_exit_130(tmp_path, sig, word, code):
+    """A stage run as a program (the shared runner): a Ctrl-C (or SIGTERM) during an item ends the stage before the
+    next one, with exit 130 and the line `<stage>: error: interrupted` (143, `terminated`), and writes no summary
+    or timings."""
     script = tmp_path / "stage.py"
-    script.write_text(textwrap.dedent("""
+    script.write_text(textwrap.dedent(f"""
         import os, signal, sys
         from stages._runner import Stage, run
 
@@ -454,14 +473,14 @@ def test_stage_interrupted_between_items_is_one_line_exit_130(tmp_path):
             for k in st.progress(range(5), "items"):
                 print("item", k, flush=True)
                 if k == 1:
-                    os.kill(os.getpid(), signal.SIGINT)
+                    os.kill(os.getpid(), signal.{sig})
 
-        run(demo, args={})
+        run(demo, args={{}})
     """))
     proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=ENV, timeout=120,
                           cwd=tmp_path)
-    assert proc.returncode == 130, proc.stderr
-    assert proc.stderr.strip() == "demo: error: interrupted"
+    assert proc.returncode == code, proc.stderr
+    assert proc.stderr.strip() == f"demo: error: {word}"
     assert proc.stdout.split("\n")[:2] == ["item 0", "item 1"] and "item 2" not in proc.stdout
     assert not (tmp_path / "outputs").exists()
 
@@ -674,3 +693,108 @@ def test_homography_command_on_unrelated_images_is_exit_1_with_counts(capsys, tm
                                              method, "--json"])
         line = only_error_line(lines)
         assert code == 1 and doc["exit"] == 1 and ("chance level" in line or "matches" in line), line
+
+
+# ------------------------------------------------------------------- flags: checked by their parameters' bounds
+
+
+@pytest.mark.parametrize("argv, expected", [
+    # beyond int64 (numba's TypingError, or an OverflowError, before); beyond a C int (OpenCV's own words before)
+    (["hough", "{a}", "--threshold", "1180591620717411303424"],
+     "hough: `--threshold` must be in [1, 2147483647], got 1180591620717411303424"),
+    (["hough", "{a}", "--method", "opencv", "--threshold", "4294967297"],
+     "hough: `--threshold` must be in [1, 2147483647], got 4294967297"),
+    (["hough", "{a}", "--rho", "nan"], "hough: `--rho` must be a finite number, got nan"),
+    (["hough", "{a}", "--canny", "-5", "100"], "hough: `--canny` must be in [0.0, inf), got -5.0"),
+    (["homography", "{a}", "{b}", "--method", "opencv_ransac", "--threshold", "1e308"],
+     "homography: `--threshold` must be in (0.0, 100.0], got 1e+308"),
+    (["homography", "{a}", "{b}", "--max-features", "1099511627776"],
+     "homography: `--max-features` must be in [1, 1000000], got 1099511627776"),
+    (["homography", "{a}", "{b}", "--ratio", "inf"], "homography: `--ratio` must be a finite number, got inf"),
+    (["homography", "{a}", "{b}", "--seed", "-1"], "homography: `--seed` must be in [0, 2147483647], got -1"),
+    (["stitch", "{a}", "{b}", "-o", "{tmp}/p.png", "--seed", "-1"],
+     "stitch: `--seed` must be in [0, 2147483647], got -1"),
+    (["stereo", "{a}", "{r}", "--max-disp", "16", "-o", "{tmp}/d.npy", "--rectify", "--seed", "-1"],
+     "stereo: `--seed` must be in [0, 2147483647], got -1"),
+    (["logo", "{a}", "--gallery", "{tmp}", "--seed", "-1"], "logo: `--seed` must be in [0, 2147483647], got -1"),
+    (["stitch", "{a}", "{b}", "-o", "{tmp}/p.png", "--compose-megapix", "1e-9"],
+     "stitch: `--compose-megapix` must be <= 0 (full resolution) or in [0.01, 1000.0], got 1e-09"),
+    (["stitch", "{a}", "{b}", "-o", "{tmp}/p.png", "--work-megapix", "1e-9"],
+     "stitch: `--work-megapix` must be <= 0 (full resolution) or in [0.01, 1000.0], got 1e-09"),
+    (["stitch", "{a}", "{b}", "-o", "{tmp}/p.png", "--min-confidence", "inf"],
+     "stitch: `--min-confidence` must be a finite number, got inf"),
+])
+def test_flags_are_checked_by_their_parameters_bounds(capsys, views, tmp_path, argv, expected):
+    """A flag takes what its params.yaml key takes: one line naming the flag and the range, exit 2, nothing written
+    (the values reached the compiled kernels, OpenCV or numpy before, with their own words or an internal error)."""
+    argv = [a.format(a=views["a"], b=views["b"], r=views["r"], tmp=tmp_path) for a in argv]
+    code, lines, doc = run_main(capsys, [*argv, "--json"])
+    line = only_error_line(lines)
+    cmd = argv[0]
+    assert line == f"cvpipe: error: {expected} (see cvpipe {cmd} --help)", line
+    assert code == 2 and doc == {"error": line.removeprefix("cvpipe: error: "), "file": None, "exit": 2}
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("spelling", ["dotted", "symlink"])
+def test_stitch_refuses_one_file_given_twice(capsys, views, tmp_path, spelling):
+    """The same photo twice is one photo: refused with the file named, not stitched as "3 images"."""
+    a = views["a"]
+    if spelling == "dotted":
+        again = a.parent / "." / a.name
+    else:
+        again = tmp_path / "link.png"
+        again.symlink_to(a)
+    out = tmp_path / "p.png"
+    code, lines, doc = run_main(capsys, ["stitch", a, views["b"], again, "-o", out, "--json"])
+    line = only_error_line(lines)
+    assert code == 2 and line == (f"cvpipe: error: IMAGE 3 ({again}) is the same file as IMAGE 1 ({a}); "
+                                  "give each photo once"), line
+    assert doc == {"error": line.removeprefix("cvpipe: error: "), "file": str(again), "exit": 2}
+    assert not out.exists()
+
+
+# ----------------------------------------------------------------------------------------------------- SIGTERM
+
+
+#: a stand-in for the edge detector of `cvpipe hough` during which the test sends the signal: it says it runs (a
+#: file), then works on for 2 s
+SLOW_EDGES = """
+import pathlib, time
+import numpy as np
+from cvpipe import hough
+
+def edges_of(gray, *a, **k):
+    pathlib.Path({ready!r}).write_text("running")
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < 2:
+        sum(range(1000))
+    return np.zeros_like(gray)
+
+hough.edges_of = edges_of
+"""
+
+
+@pytest.mark.parametrize("json_flag", [True, False], ids=["json", "text"])
+def test_sigterm_is_one_line_exit_143_and_the_json_record(views, tmp_path, json_flag):
+    """A real SIGTERM from another process while a step runs: the step ends the command as a Ctrl-C would, with its
+    own status 143, the line `cvpipe: error: terminated` and, with --json, the failure record; nothing else."""
+    ready = tmp_path / "ready"
+    script = (f"import sys\nsys.argv = ['cvpipe', *sys.argv[1:]]\n{SLOW_EDGES.format(ready=str(ready))}\n"
+              "from cvpipe._entry import main\nsys.exit(main())")
+    overlay = tmp_path / "o.png"
+    proc = subprocess.Popen([sys.executable, "-c", script, "hough", str(views["a"]), "--overlay", str(overlay),
+                             *(["--json"] if json_flag else [])],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+    t0 = time.monotonic()
+    while not ready.exists():
+        assert proc.poll() is None and time.monotonic() - t0 < 60, "the command never reached its step"
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGTERM)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert (proc.returncode, stderr) == (143, "cvpipe: error: terminated\n")
+    if json_flag:
+        assert json.loads(stdout) == {"error": "terminated", "file": None, "exit": 143}
+    else:
+        assert stdout == ""
+    assert not overlay.exists() and no_temporaries(tmp_path)

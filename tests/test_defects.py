@@ -340,7 +340,7 @@ def test_inspect_command_reports_failures_and_keeps_the_other_results(reference,
 def test_inspect_command_rejects_bad_options(tmp_path, capsys, reference):
     io.save_image(tmp_path / "ref.png", reference)
     code = cli.main(["inspect", str(tmp_path / "ref.png"), str(tmp_path / "ref.png"), "--threshold", "2"])
-    assert code == 2 and "`threshold` must be in (0.0, 1.0], got 2.0" in capsys.readouterr().err
+    assert code == 2 and "`--threshold` must be in (0.0, 1.0], got 2.0" in capsys.readouterr().err
 
 
 def test_inspect_command_all_failing_and_unreadable_reference(tmp_path, capsys, reference):

@@ -51,7 +51,7 @@ def test_cli_homography_errors(pair_files, tmp_path, capsys):
     assert cli.main(["homography", str(tmp_path / "missing.png"), str(b)]) == 2
     assert "missing.png" in capsys.readouterr().err
     assert cli.main(["homography", str(a), str(b), "--threshold", "0"]) == 2
-    assert "`threshold` must be a finite number > 0" in capsys.readouterr().err
+    assert "`--threshold` must be in (0.0, 100.0], got 0.0" in capsys.readouterr().err
     blank = tmp_path / "blank.png"
     io.save_image(blank, np.full((100, 100), 128, np.uint8))
     # no features on a flat image: the algorithm cannot succeed -> exit 1 with advice

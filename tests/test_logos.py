@@ -487,7 +487,7 @@ def test_bench_needs_a_data_root(monkeypatch, capsys):
 
 def test_cli_bad_max_features(gallery_dir, capsys):
     assert cli.main(["logo", "x.jpg", "--gallery", str(gallery_dir), "--max-features", "0"]) == 2
-    assert "`--max-features` must be a positive integer" in capsys.readouterr().err
+    assert "`--max-features` must be in [1, 1000000], got 0" in capsys.readouterr().err
 
 
 def test_cli_missing_gallery_folder(tmp_path, capsys):

@@ -53,8 +53,8 @@ def test_defaults_and_conversion():
     ({"pair": 5}, r"`demo\.pair` must be a list, got 5$"),
     ({"pair": [1, "b"]}, r"`demo\.pair\[1\]` must be an integer, got 'b'$"),
     ({"opt": "x"}, r"`demo\.opt` must be a number, got 'x'$"),
-    ({"hi": 2}, r"`demo\.hi` must be in \[3, inf\], got 2 \(the lower limit is `demo\.n`\)$"),
-    ({"n": 9}, r"`demo\.hi` must be in \[9, inf\], got 5 \(the lower limit is `demo\.n`\)$"),
+    ({"hi": 2}, r"`demo\.hi` must be in \[3, 2147483647\], got 2 \(the lower limit is `demo\.n`\)$"),
+    ({"n": 9}, r"`demo\.hi` must be in \[9, 2147483647\], got 5 \(the lower limit is `demo\.n`\)$"),
 ])
 def test_rejections_name_the_key(mapping, message):
     with pytest.raises(InputError, match=message):
@@ -76,7 +76,7 @@ def test_messages_name_the_dotted_key_and_its_allowed_range():
         from_mapping(MatchParams, {"foo": 1}, "homography.match")
     with pytest.raises(InputError, match=r"`homography\.features\.max_features` must be in \[1, 1000000\], got 0"):
         from_mapping(FeaturesParams, {"max_features": 0}, "homography.features")
-    with pytest.raises(InputError, match=r"^`panorama\.match\.candidates` must be in \[0, inf\], got -1$"):
+    with pytest.raises(InputError, match=r"^`panorama\.match\.candidates` must be in \[0, 2147483647\], got -1$"):
         from_mapping(params.PanoramaMatchParams, {"candidates": -1}, "panorama.match")
     # a field's own limit and the one another field sets are shown together, whichever is broken
     with pytest.raises(InputError, match=r"^`panorama\.match\.refit_threshold` must be in \[0\.0, 5\.0\], got -1\.0 "
@@ -407,3 +407,104 @@ def test_examples_run():
 
     result = doctest.testmod(base, optionflags=doctest.NORMALIZE_WHITESPACE)
     assert result.attempted > 0 and result.failed == 0, result
+
+
+# ----------------------------------------------------------- numbers the code can use: finite, C int, real ranges
+
+
+FLOATS = [pytest.param(s, c, n, id=f"{s}.{n}") for s, c, n, info in _fields() if info.annotation is float]
+INTS = [pytest.param(s, c, n, id=f"{s}.{n}") for s, c, n, info in _fields() if info.annotation is int]
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), float("-inf")], ids=["nan", "inf", "-inf"])
+@pytest.mark.parametrize("section, cls, name", FLOATS)
+def test_every_float_refuses_nan_and_infinity(section, cls, name, bad):
+    """No float parameter takes NaN or an infinity (a range check lets inf through, and NaN compares False)."""
+    for build, key in ((lambda: from_mapping(cls, {name: bad}, section), f"{section}.{name}"),
+                       (lambda: cls(**{name: bad}), name)):
+        with pytest.raises(InputError, match=r"^" + re.escape(f"`{key}` must be a finite number, got {bad!r}") + "$"):
+            build()
+
+
+@pytest.mark.parametrize("section, cls, name", INTS)
+def test_every_integer_fits_a_c_int(section, cls, name):
+    """An integer parameter reaches OpenCV or a compiled kernel as a C int: 2**31 and beyond are refused with the
+    range, and so is anything below -2**31; the message shows the field's own limits where it declares them."""
+    for bad in (2**31, 2**70, -(2**31) - 1):
+        with pytest.raises(InputError) as info:
+            from_mapping(cls, {name: bad}, section)
+        msg = str(info.value)
+        m = re.fullmatch(rf"`{re.escape(section)}\.{name}` must be in [\[(](-?\d+), (-?\d+)[\])], got {bad}"
+                         r"( \(the (lower|upper) limit is `[\w.]+`\))?", msg)
+        assert m and -(2**31) <= int(m.group(1)) and int(m.group(2)) <= 2**31 - 1, msg
+
+
+def test_integer_range_messages():
+    with pytest.raises(InputError, match=r"^`hough\.lines\.threshold` must be in \[1, 2147483647\], "
+                                         r"got 1180591620717411303424$"):
+        from_mapping(HoughLinesParams, {"threshold": 2**70}, "hough.lines")
+    with pytest.raises(InputError, match=r"^`demo\.hi` must be in \[3, 2147483647\], got 2147483648 "
+                                         r"\(the lower limit is `demo\.n`\)$"):
+        from_mapping(Demo, {"hi": 2**31}, "demo")
+    assert from_mapping(Demo, {"n": -(2**31), "hi": 2**31 - 1}, "demo").hi == 2**31 - 1  # both ends accepted
+
+
+def test_a_field_may_allow_non_finite_floats_and_wider_integers():
+    """The defaults of the rule are per side: a field that declares a limit, or ``allow_inf_nan``, sets its own."""
+    from pydantic import Field
+
+    class Wide(Section):
+        big: int = Field(0, ge=0, le=2**63 - 1)
+        score: float = Field(0.0, allow_inf_nan=True)
+
+    assert Wide(big=2**40, score=float("-inf")).big == 2**40
+    with pytest.raises(InputError, match=r"^`big` must be in \[0, 9223372036854775807\], got 9223372036854775808$"):
+        Wide(big=2**63)
+
+
+@pytest.mark.parametrize("section, name", [(s, n) for s, c, n, info in _fields() if n == "seed"])
+def test_seeds_are_non_negative(section, name):
+    with pytest.raises(InputError, match=r"^`" + re.escape(f"{section}.{name}") + r"` must be in \[0, 2147483647\], "
+                                         r"got -1$"):
+        from_mapping(params.SECTIONS[section], {name: -1}, section)
+
+
+@pytest.mark.parametrize("section, mapping, message", [
+    # OpenCV's StereoBM asserts uniquenessRatio >= 0 (a cv2.error from inside compute())
+    ("stereo.opencv_bm", {"uniqueness": -5}, r"`stereo\.opencv_bm\.uniqueness` must be in \[0, 100\], got -5"),
+    ("stereo.opencv_sgbm", {"uniqueness": -5}, r"`stereo\.opencv_sgbm\.uniqueness` must be in \[0, 100\], got -5"),
+    ("stereo.opencv_bm", {"speckle_range": -1}, r"`stereo\.opencv_bm\.speckle_range` must be in \[0, 4096\], got -1"),
+    ("stereo.opencv_sgbm", {"speckle_size": -1},
+     r"`stereo\.opencv_sgbm\.speckle_size` must be in \[0, 2147483647\], got -1"),
+    ("homography.estimate", {"threshold": 1e308},
+     r"`homography\.estimate\.threshold` must be in \(0\.0, 100\.0\], got 1e\+308"),
+    ("panorama.warp", {"max_canvas_megapix": float("inf")},
+     r"`panorama\.warp\.max_canvas_megapix` must be a finite number, got inf"),
+    ("panorama.features", {"work_megapix": float("-inf")},
+     r"`panorama\.features\.work_megapix` must be a finite number, got -inf"),
+    ("panorama.features", {"work_megapix": 1e-9},
+     r"`panorama\.features\.work_megapix` must be <= 0 \(full resolution\) or in \[0\.01, 1000\.0\], got 1e-09"),
+    ("panorama.warp", {"compose_megapix": 0.005},
+     r"`panorama\.warp\.compose_megapix` must be <= 0 \(full resolution\) or in \[0\.01, 1000\.0\], got 0\.005"),
+    ("stereo.sgm", {"ad_weight": 256.0}, r"`stereo\.sgm\.ad_weight` must be in \[0\.0, 255\.0\], got 256\.0"),
+    # the census signature of an (h, w) window holds h * w - 1 bits in a uint64 (cvpipe.stereo.sgm)
+    ("stereo.sgm", {"census_size": [99, 99]},
+     r"`stereo\.sgm\.census_size` must be two odd sizes \(height, width\) covering at most 65 pixels, got \[99, 99\]"),
+    ("stereo.sgm", {"census_size": [9, 9]}, r"`stereo\.sgm\.census_size` must be two odd .*, got \[9, 9\]"),
+    ("stereo.sgm", {"census_size": [4, 5]}, r"`stereo\.sgm\.census_size` must be two odd .*, got \[4, 5\]"),
+    ("stereo.sgm", {"census_size": [-1, 5]}, r"`stereo\.sgm\.census_size` must be two odd .*, got \[-1, 5\]"),
+])
+def test_values_the_algorithms_cannot_take_are_refused_by_the_loader(section, mapping, message):
+    with pytest.raises(InputError, match=r"^" + message + "$"):
+        from_mapping(params.SECTIONS[section], mapping, section)
+
+
+@pytest.mark.parametrize("section, mapping", [
+    ("panorama.features", {"work_megapix": 0.0}), ("panorama.features", {"work_megapix": -1.0}),
+    ("panorama.features", {"work_megapix": 0.01}), ("panorama.warp", {"compose_megapix": -1.0}),
+    ("stereo.sgm", {"census_size": [5, 13]}), ("stereo.sgm", {"census_size": [1, 1]}),
+    ("stereo.sgm", {"census_size": [7, 9]}), ("stereo.opencv_sgbm", {"lr_max_diff": -1}),
+])
+def test_the_edges_of_those_ranges_are_accepted(section, mapping):
+    got = from_mapping(params.SECTIONS[section], mapping, section)
+    assert all(getattr(got, k) == (tuple(v) if isinstance(v, list) else v) for k, v in mapping.items())

@@ -489,10 +489,24 @@ GROUPS = {
 # -------------------------------------------------------------------------------------------------- limits
 
 
+#: the largest limits file read, bytes (the committed one is a few kB)
+MAX_LIMITS_BYTES = 1_000_000
+
+
 def read_limits(path: str | os.PathLike) -> dict[str, tuple[float, str]]:
-    """row -> (limit, why) from a limits file: ``row limit why...`` per line, ``#`` starts a comment line."""
+    """row -> (limit, why) from a limits file: ``row limit why...`` per line, ``#`` starts a comment line.
+
+    The file must be a regular UTF-8 text file of at most :data:`MAX_LIMITS_BYTES` (a device such as
+    ``/dev/zero`` is refused before anything is read); each refusal is one line naming it.
+    """
+    from .. import io
+
+    p = Path(path)
+    if p.exists() and not p.is_dir() and not p.is_file():
+        raise InputError(f"{p}: not a regular file, expected a limits text file", file=str(p))
+    text = io.read_text(p, "limits", max_bytes=MAX_LIMITS_BYTES)
     limits = {}
-    for number, line in enumerate(Path(path).read_text().splitlines(), 1):
+    for number, line in enumerate(text.splitlines(), 1):
         if not line.strip() or line.lstrip().startswith("#"):
             continue
         parts = line.split(None, 2)
@@ -543,6 +557,8 @@ def run(args: argparse.Namespace) -> int:
     if unknown:
         raise InputError(f"--rows: unknown {', '.join(unknown)}; choices: {', '.join(GROUPS)}")
     limits = read_limits(args.limits)
+    if args.out:  # before the rows: a result that cannot be written must not cost the measuring first
+        io.check_output_path(args.out, "--out")
     ctx = {"samples": samples, "data": data, "repeats": args.repeats,
            "progress": lambda items, desc: io.progress(items, desc)}
     rows: list[Row] = []

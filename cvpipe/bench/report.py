@@ -317,14 +317,23 @@ def _render_all(results: dict[str, Any], names: list[str], machine: str | None, 
 
 
 def load_results(folder: str | os.PathLike) -> dict[str, Any]:
-    """Every benchmark of :data:`REPORTED` (None when its JSON is absent) and any other ``*.json`` in ``folder``."""
+    """Every benchmark of :data:`REPORTED` (None when its JSON is absent) and any other ``*.json`` in ``folder``.
+
+    Raises
+    ------
+    InputError
+        ``folder`` is missing or holds no ``*.json`` (a page of "not measured" lines would replace the real one).
+    """
     from .. import io
 
     root = Path(folder)
     if not root.is_dir():
         raise InputError(f"--dir {root}: no such folder")
+    found = sorted(root.glob("*.json"))
+    if not found:
+        raise InputError(f"--dir {root}: no benchmark results (*.json) in this folder")
     results: dict[str, Any] = {name: None for name in REPORTED}
-    for path in sorted(root.glob("*.json")):
+    for path in found:
         results[path.stem] = io.load_json(path)
     return results
 

@@ -105,26 +105,55 @@ DETECTORS = ("akaze", "brisk", "orb", "sift")
 
 def add_feature_arguments(parser, detector: str, max_features: int, ratio: float, flag: str = "--detector") -> None:
     """``--detector`` (or ``flag``), ``--max-features`` and ``--ratio``, with the defaults of the command's
-    parameter sections."""
+    parameter sections, the numbers checked by the fields they set (:func:`param_type`)."""
+    from ..params import FeaturesParams, MatchParams
+
     parser.add_argument(flag, dest=flag.lstrip("-").replace("-", "_"), type=str.lower, choices=DETECTORS,
                         default=detector, help=f"keypoint detector (default {detector})")
-    parser.add_argument("--max-features", type=int, default=max_features,
+    parser.add_argument("--max-features", type=param_type(FeaturesParams, "max_features"), default=max_features,
                         help=f"keypoints per image (default {max_features})")
-    parser.add_argument("--ratio", type=float, default=ratio, help=f"Lowe's ratio test (default {ratio})")
+    parser.add_argument("--ratio", type=param_type(MatchParams, "ratio"), default=ratio,
+                        help=f"Lowe's ratio test (default {ratio})")
+
+
+def param_type(cls, name: str):
+    """The argparse ``type`` of a flag that sets the field ``name`` of the section class ``cls``: the text becomes the
+    field's ``int`` or ``float`` and is checked by the field's own declarations
+    (:func:`cvpipe.params.check_field`: range, finiteness, C ``int``), so that a flag takes what its params.yaml key
+    takes. A value it refuses is the one line naming the flag (``cvpipe: error: stitch: `--seed` must be in [0,
+    2147483647], got -1``); a limit set by another field is checked when the command builds the section."""
+    import argparse
+
+    from ..errors import InputError
+    from ..params import check_field
+
+    convert = float if cls.model_fields[name].annotation is float else int
+
+    def parse(text: str):
+        value = convert(text)  # a ValueError: argparse's "invalid int value: 'x'"
+        try:
+            return check_field(cls, name, value)
+        except InputError as exc:
+            raise argparse.ArgumentTypeError(str(exc).removeprefix(f"`{name}` ")) from None
+
+    parse.__name__ = convert.__name__
+    return parse
 
 
 def add_param_options(parser, section, helps: dict[str, str]) -> None:
     """One ``--field-name`` option per ``helps`` entry, declared by the field of the parameter ``section`` (a
-    :class:`cvpipe.params.Section` instance): its default, its type and, for a ``Literal`` field, its choices, which
-    ``--help`` lists. The help text gets ``(default X)`` appended."""
+    :class:`cvpipe.params.Section` instance): its default, its type and range (:func:`param_type`) and, for a
+    ``Literal`` field, its choices, which ``--help`` lists. The help text gets ``(default X)`` appended."""
     import typing
 
     for name, text in helps.items():
         default = getattr(section, name)
         annotation = type(section).model_fields[name].annotation
         choices = typing.get_args(annotation) if typing.get_origin(annotation) is typing.Literal else None
+        numeric = isinstance(default, (int, float)) and not isinstance(default, bool)
+        kind = param_type(type(section), name) if numeric and not choices else type(default)
         shown = f"{default:g}" if isinstance(default, float) else default
-        parser.add_argument("--" + name.replace("_", "-"), type=type(default), choices=choices, default=default,
+        parser.add_argument("--" + name.replace("_", "-"), type=kind, choices=choices, default=default,
                             help=f"{text} (default {shown})")
 
 

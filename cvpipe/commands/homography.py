@@ -37,12 +37,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from .. import io
-    from ..errors import EstimationError, InputError
+    from ..errors import EstimationError
 
-    if args.max_features < 1:
-        raise InputError(f"`--max-features` must be >= 1, got {args.max_features}")
-    if not 0.0 < args.ratio <= 1.0:
-        raise InputError(f"`--ratio` must be in (0, 1], got {args.ratio}")
+    # every number was checked by its field when parsed (add_feature_arguments, add_param_options)
+    estimate = HomographyEstimateParams(**{k: getattr(args, k) for k in HomographyEstimateParams.model_fields})
     io.check_distinct_outputs([("`--overlay`", args.overlay)], [("A", args.a), ("B", args.b)])
     from .. import homography
 
@@ -57,10 +55,7 @@ def run(args: argparse.Namespace) -> int:
             "try another --detector, more --max-features or a larger --ratio"
         )
     with step(f"estimate ({args.method})"):
-        # the flags into the section unvalidated: the estimator checks the values and names them
-        fields = HomographyEstimateParams.model_fields
-        e = HomographyEstimateParams().model_copy(update={k: getattr(args, k) for k in fields})
-        fit = homography.estimate_with(src, dst, e, args.method)
+        fit = homography.estimate_with(src, dst, estimate, args.method)
     result = {"H": fit.H, "matches": len(src), "inliers": fit.num_inliers}
     if args.overlay:
         from ..overlays import checkerboard_warp

@@ -7,7 +7,7 @@ import math
 import sys
 
 from ..params import HoughEdgesParams, HoughLinesParams
-from . import add_result_arguments, final_output, note, overlay_paths, progress, read_images, step
+from . import add_result_arguments, final_output, note, overlay_paths, param_type, progress, read_images, step
 
 HELP = "find straight lines (standard Hough transform, cv2.HoughLines conventions)"
 EXAMPLE = "cvpipe hough data/samples/hough/synthetic_grid.png --threshold 100 --max-lines 10 --overlay lines.png"
@@ -27,12 +27,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--method", choices=METHODS, default=None,
                         help="our transform or cv2.HoughLines (default: ours)")
     parser.add_argument("--impl", choices=METHODS, default=None, help=argparse.SUPPRESS)  # deprecated spelling
-    parser.add_argument("--rho", type=float, default=p.rho, help=f"distance resolution in pixels (default {p.rho})")
-    parser.add_argument("--theta-deg", type=float, default=p.theta_deg,
+    lines = type(p)
+    parser.add_argument("--rho", type=param_type(lines, "rho"), default=p.rho,
+                        help=f"distance resolution in pixels (default {p.rho})")
+    parser.add_argument("--theta-deg", type=param_type(lines, "theta_deg"), default=p.theta_deg,
                         help=f"angle resolution in degrees (default {p.theta_deg})")
-    parser.add_argument("--threshold", type=int, default=p.threshold,
+    parser.add_argument("--threshold", type=param_type(lines, "threshold"), default=p.threshold,
                         help=f"a line needs more than this many votes (default {p.threshold})")
-    parser.add_argument("--canny", type=float, nargs=2, metavar=("LOW", "HIGH"), default=(e.canny_low, e.canny_high),
+    # each value checked by its field (LOW's range applies to both: HIGH >= LOW >= 0)
+    parser.add_argument("--canny", type=param_type(type(e), "canny_low"), nargs=2, metavar=("LOW", "HIGH"),
+                        default=(e.canny_low, e.canny_high),
                         help=f"Canny hysteresis thresholds (default {e.canny_low:g} {e.canny_high:g})")
     parser.add_argument("--max-lines", type=int, default=DEFAULT_MAX_LINES, metavar="K",
                         help=f"report the K lines with most votes, 0 = all (default {DEFAULT_MAX_LINES})")
@@ -83,16 +87,16 @@ def run(args: argparse.Namespace) -> int:
     method = method_of(args)
     if args.refine and method != "ours":
         raise InputError("`--refine` is only available with --method ours")
-    if not (args.theta_deg > 0 and math.isfinite(args.theta_deg)):
-        raise InputError(f"`--theta-deg` must be > 0, got {args.theta_deg}")
     if args.max_lines < 0:
         raise InputError(f"`--max-lines` must be >= 0 (0 = all), got {args.max_lines}")
+    low, high = args.canny
+    if not low <= high:
+        raise InputError(f"`--canny` must be LOW <= HIGH, got {low:g} {high:g}")
     scheduler = check_scheduler(args.scheduler, "--scheduler")
-    # the flags go into the sections unvalidated (model_copy): the library checks them and names the values, and
-    # the checks above name the flags
-    edges_params = HoughEdgesParams().model_copy(update={"canny_low": args.canny[0], "canny_high": args.canny[1]})
-    lines_params = HoughLinesParams().model_copy(update={"rho": args.rho, "theta_deg": args.theta_deg,
-                                                         "threshold": args.threshold, "refine": args.refine})
+    # each flag was checked by its field when parsed (param_type), and the LOW <= HIGH limit above
+    edges_params = HoughEdgesParams(canny_low=low, canny_high=high)
+    lines_params = HoughLinesParams(rho=args.rho, theta_deg=args.theta_deg, threshold=args.threshold,
+                                    refine=args.refine)
     shared = (edges_params, lines_params, method)
     pictures = overlay_paths(args.image, args.overlay, SUFFIX)
     io.check_distinct_outputs([("`--overlay`", p) for p in pictures],

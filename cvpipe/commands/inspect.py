@@ -8,8 +8,8 @@ from pathlib import Path
 
 from typing import TYPE_CHECKING
 
-from ..params import InspectParams, replace
-from . import (DETECTORS, add_result_arguments, final_output, overlay_paths, progress, read_images,
+from ..params import DefectDiffParams, DefectRegionParams, DefectRegisterParams, InspectParams, replace
+from . import (DETECTORS, add_result_arguments, final_output, overlay_paths, param_type, progress, read_images,
                with_flags)
 
 if TYPE_CHECKING:
@@ -29,16 +29,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "when two probes share a file name)")
     parser.add_argument("--detector", type=str.lower, choices=DETECTORS, default=_DEFAULTS.features.detector,
                         help=f"keypoints for the coarse registration (default {_DEFAULTS.features.detector})")
-    parser.add_argument("--threshold", type=float, default=_DEFAULTS.regions.threshold,
+    parser.add_argument("--threshold", type=param_type(DefectRegionParams, "threshold"),
+                        default=_DEFAULTS.regions.threshold,
                         help="difference threshold as a fraction of the reference contrast "
                              f"(default {_DEFAULTS.regions.threshold:g})")
-    parser.add_argument("--tolerance", type=int, default=_DEFAULTS.diff.tolerance_radius,
+    parser.add_argument("--tolerance", type=param_type(DefectDiffParams, "tolerance_radius"),
+                        default=_DEFAULTS.diff.tolerance_radius,
                         help=f"misregistration tolerated, px (default {_DEFAULTS.diff.tolerance_radius})")
-    parser.add_argument("--min-area", type=int, default=_DEFAULTS.regions.min_area,
+    parser.add_argument("--min-area", type=param_type(DefectRegionParams, "min_area"),
+                        default=_DEFAULTS.regions.min_area,
                         help=f"smallest defect kept, px (default {_DEFAULTS.regions.min_area})")
-    parser.add_argument("--pad", type=float, default=_DEFAULTS.regions.pad,
+    parser.add_argument("--pad", type=param_type(DefectRegionParams, "pad"),
+                        default=_DEFAULTS.regions.pad,
                         help=f"pad the probe boxes by this many px (default {_DEFAULTS.regions.pad:g})")
-    parser.add_argument("--ecc-levels", type=int, default=_DEFAULTS.register.ecc_levels,
+    parser.add_argument("--ecc-levels", type=param_type(DefectRegisterParams, "ecc_levels"),
+                        default=_DEFAULTS.register.ecc_levels,
                         help=f"pyramid levels of the ECC refinement (default {_DEFAULTS.register.ecc_levels})")
     add_result_arguments(parser, "write the probe with its defect boxes", json="print the results as JSON on stdout",
                          items="probes", suffix="_regions")

@@ -8,9 +8,9 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..params import LogoFeaturesParams, LogoMatchParams, LogoVerifyParams
+from ..params import HomographyEstimateParams, LogoFeaturesParams, LogoMatchParams, LogoVerifyParams
 from . import (DETECTORS, add_feature_arguments, add_result_arguments, final_output,  # noqa: F401
-               overlay_paths, progress, read_images,
+               overlay_paths, param_type, progress, read_images,
                step)  # DETECTORS: the ``--method`` choices (a test keeps them equal)
 
 if TYPE_CHECKING:
@@ -113,12 +113,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--gallery", required=True, metavar="DIR",
                         help="reference logos: DIR/<brand>.<ext> or DIR/<brand>/*.<ext>")
     add_feature_arguments(parser, fp.detector, fp.max_features, mp.ratio, flag="--method")
-    parser.add_argument("--min-long-side", type=int, default=fp.scene_min_long_side,
+    parser.add_argument("--min-long-side", type=param_type(type(fp), "scene_min_long_side"),
+                        default=fp.scene_min_long_side,
                         help=f"enlarge smaller scene photos to this long side before detection, 0 = never "
                              f"(default {fp.scene_min_long_side})")
-    parser.add_argument("--threshold", type=float, default=vp.score_threshold,
+    parser.add_argument("--threshold", type=param_type(type(vp), "score_threshold"), default=vp.score_threshold,
                         help=f"score (-log10 NFA) needed to name a brand (default {vp.score_threshold})")
-    parser.add_argument("--seed", type=int, default=0, help="RANSAC seed (default 0)")
+    # a RANSAC seed, as homography.estimate.seed (every seed field is a params.Seed)
+    parser.add_argument("--seed", type=param_type(HomographyEstimateParams, "seed"), default=0,
+                        help="RANSAC seed (default 0)")
     add_result_arguments(parser, "write the scene with each found logo outlined and named", items="scenes",
                          suffix=SUFFIX, json='print a JSON list, one record per scene ({"scene", "brand", "inliers", '
                                              '"score", "quad", "logos": [every brand found, best first], "overlay"})')
@@ -127,18 +130,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from .. import io
     from ..compute import check_scheduler, map_items, raise_unexpected
-    from ..errors import CvpipeError, InputError
+    from ..errors import CvpipeError
     from ..overlays import draw_quads
 
-    if args.max_features < 1:
-        raise InputError(f"`--max-features` must be a positive integer, got {args.max_features}")
-    try:
-        mp = LogoMatchParams(ratio=args.ratio)
-        vp = LogoVerifyParams(score_threshold=args.threshold)
-    except ValueError as exc:
-        raise InputError(str(exc).replace("`ratio`", "`--ratio`")) from exc
-    if args.min_long_side < 0:
-        raise InputError(f"`--min-long-side` must be a non-negative number of pixels, got {args.min_long_side}")
+    # every number was checked by its field when parsed (param_type)
+    mp = LogoMatchParams(ratio=args.ratio)
+    vp = LogoVerifyParams(score_threshold=args.threshold)
     from .. import logo
 
     scheduler = check_scheduler(args.scheduler, "--scheduler")

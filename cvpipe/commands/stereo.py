@@ -9,8 +9,8 @@ import os
 import sys
 from typing import TYPE_CHECKING
 
-from ..params import StereoBmParams, StereoSgbmParams, StereoSgmParams
-from . import final_output, note, step
+from ..params import StereoBmParams, StereoRectifyParams, StereoSgbmParams, StereoSgmParams
+from . import final_output, note, param_type, step
 
 if TYPE_CHECKING:
     import numpy as np
@@ -55,7 +55,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                         "NaN = invalid; or .png picture")
     parser.add_argument("--ply", help="coloured point cloud of the valid pixels, binary PLY (needs --calib)")
     parser.add_argument("--overlay", metavar="PNG", help="write the colour-mapped disparity with a colour bar (px)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the RANSAC sampling (--rectify)")
+    parser.add_argument("--seed", type=param_type(StereoRectifyParams, "seed"), default=StereoRectifyParams().seed,
+                        help="seed of the RANSAC sampling (--rectify)")
     parser.add_argument("--json", action="store_true",
                         help='print {"valid_fraction", "max_disp", "disparity_only", ...; with --rectify "H_left", '
                              '"H_right", "vertical_error_median_px", "vertical_error_p95_px"} on stdout')

@@ -79,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
     io.check_output_path(args.out, "`-o`", io.IMAGE_WRITE_SUFFIXES)
     io.check_distinct_outputs([("`-o`", args.out), ("`--overlay`", args.overlay)],
                               [(f"IMAGE {k + 1}", path) for k, path in enumerate(args.images)])
+    _check_distinct_images(args.images)
     images, positions, dropped = [], [], []
     for k, path in enumerate(progress(args.images, "read")):
         try:
@@ -150,6 +151,19 @@ def run(args: argparse.Namespace) -> int:
         print(f"{args.out}: {result['size'][0]}x{result['size'][1]} from {len(result['used'])} images: "
               + ", ".join(result["used"]) + "".join(f"\n  dropped {d['image']}: {d['reason']}" for d in dropped))
     return 0
+
+
+def _check_distinct_images(paths: list[str]) -> None:
+    """Refuse a photo given twice (the same resolved path, also through a symlink): it would be stitched onto
+    itself as one more image."""
+    from ..errors import InputError
+
+    first: dict[Path, int] = {}
+    for k, path in enumerate(paths):
+        j = first.setdefault(Path(path).resolve(), k)
+        if j != k:
+            raise InputError(f"IMAGE {k + 1} ({path}) is the same file as IMAGE {j + 1} ({paths[j]}); give each photo "
+                             "once", file=path)
 
 
 def _outline(H, width: int, height: int):

@@ -11,7 +11,10 @@ out-of-range keys are refused with an
 :class:`~cvpipe.errors.InputError` of one line that names the dotted key and what it accepts (```hough.lines.rho`
 must be in (0.0, 100.0], got -1``); the same check runs when Python code builds a model directly, and the message
 then names the bare field. Types are strict: ``true`` and ``"3"`` are not numbers, ``3.0`` is not an integer, but
-``3`` is accepted for a float field (and stored as ``3.0``).
+``3`` is accepted for a float field (and stored as ``3.0``). Every float is finite and every integer fits a C ``int``
+unless its field declares otherwise (:mod:`cvpipe.params.base`); a range the algorithm needs beyond that is declared
+on the field (``census_size``: odd, at most 65 pixels), and the command-line flags that set a field are checked by
+the same declarations (:func:`~cvpipe.params.base.check_field`).
 
 A new section is a :class:`Section` subclass, one :data:`SECTIONS` entry and the same keys in ``params.yaml``::
 
@@ -33,12 +36,12 @@ import os
 import warnings
 from typing import Annotated, Literal
 
-from pydantic import Field, field_validator
+from pydantic import AfterValidator, Field, field_validator
 from pydantic_core import PydanticCustomError
 
 # the machinery, re-exported: `from cvpipe.params import Section, from_mapping, load_section` keeps working
-from .base import (Bound, Section, from_mapping, load_section, read_params_file, replace,  # noqa: F401
-                   section_or_default)
+from .base import (INT_MAX, INT_MIN, Bound, Section, check_field, from_mapping, load_section,  # noqa: F401
+                   must, read_params_file, replace, section_or_default)
 
 #: the feature detectors of :data:`cvpipe.features.DETECTORS` (a test keeps the two equal)
 Detector = Literal["sift", "orb", "brisk", "akaze"]
@@ -52,6 +55,24 @@ Ratio = Annotated[float, Field(gt=0.0, le=1.0)]
 Correlation = Annotated[float, Field(ge=-1.0, le=1.0)]
 #: a morphology radius in pixels
 Radius = Annotated[int, Field(ge=0, le=50)]
+#: a random seed (numpy's generators take no negative one)
+Seed = Annotated[int, Field(ge=0)]
+#: a RANSAC inlier threshold in pixels
+RansacThreshold = Annotated[float, Field(gt=0.0, le=100.0)]
+
+#: the smallest registration or compose resolution, megapixels: 10 000 pixels (100 x 100), below which a photo has
+#: too few features to register and a panorama too few pixels to show anything; and the largest
+MIN_MEGAPIX, MAX_MEGAPIX = 0.01, 1000.0
+
+
+def _megapix(value: float) -> float:
+    if 0.0 < value < MIN_MEGAPIX:
+        raise must(f"be <= 0 (full resolution) or in [{MIN_MEGAPIX}, {MAX_MEGAPIX}]")
+    return value
+
+
+#: a working resolution in megapixels per image, <= 0 for full resolution
+Megapix = Annotated[float, Field(le=MAX_MEGAPIX), AfterValidator(_megapix)]
 
 
 # --------------------------------------------------------------------------------------------- shared sections
@@ -60,7 +81,7 @@ Radius = Annotated[int, Field(ge=0, le=50)]
 class SamplesParams(Section):
     """``samples``: the bundled sample data set."""
 
-    seed: int = 20261122
+    seed: Seed = 20261122
     logo_scenes: int = Field(40, ge=1, le=1000)
     logo_negatives: int = Field(12, ge=0, le=1000)
 
@@ -85,10 +106,10 @@ class MatchParams(Section):
 class HomographyEstimateParams(Section):
     """``homography.estimate``: robust homography from the matches (the same settings for every method)."""
 
-    threshold: float = Field(3.0, gt=0.0)
+    threshold: RansacThreshold = 3.0
     confidence: float = Field(0.999, gt=0.0, lt=1.0)
     max_iters: int = Field(10_000, ge=1, le=10_000_000)
-    seed: int = 0
+    seed: Seed = 0
 
 
 class HomographyReportParams(Section):
@@ -154,7 +175,7 @@ class DefectRegisterParams(Section):
     direct_fallback: bool = True
     direct_min_correlation: Correlation = 0.8
     retry_correlation: Correlation = 0.95
-    seed: int = 0
+    seed: Seed = 0
 
 
 class DefectDiffParams(Section):
@@ -208,7 +229,7 @@ class PanoramaFeaturesParams(FeaturesParams):
     full resolution; ``cv2.Stitcher`` uses 0.6)."""
 
     max_features: MaxFeatures = 1500
-    work_megapix: float = Field(0.6, le=1000.0)
+    work_megapix: Megapix = 0.6
 
 
 class PanoramaMatchParams(Section):
@@ -217,12 +238,12 @@ class PanoramaMatchParams(Section):
     homography is refitted on its inliers with the tighter ``refit_threshold`` (0: no refit)."""
 
     ratio: Ratio = 0.8
-    ransac_threshold: float = Field(3.0, gt=0.0)
+    ransac_threshold: RansacThreshold = 3.0
     min_inliers: int = Field(10, ge=4)
     min_confidence: float = Field(1.0, ge=0.0)
     candidates: int = Field(5, ge=0)
     refit_threshold: Annotated[float, Bound("<=", "ransac_threshold")] = Field(2.0, ge=0.0)
-    seed: int = 0
+    seed: Seed = 0
 
 
 class PanoramaHomographiesParams(Section):
@@ -237,7 +258,7 @@ class PanoramaWarpParams(Section):
     """``panorama.warp``: projection and compose resolution (``compose_megapix`` <= 0 means full resolution)."""
 
     projection: Literal["plane", "cylindrical", "spherical"] = "plane"
-    compose_megapix: float = Field(-1.0, le=1000.0)
+    compose_megapix: Megapix = -1.0
     max_canvas_megapix: float = Field(200.0, gt=0.0)
 
 
@@ -318,11 +339,23 @@ class StereoDisparityParams(Section):
     max_disp: int = Field(64, ge=1, le=4096)
 
 
+#: most pixels a census window covers: its signature holds one bit per pixel but the centre, in a uint64
+#: (:func:`cvpipe.stereo.disparity_sgm`)
+CENSUS_MAX_PIXELS = 65
+
+
+def _census_window(size: tuple[int, int]) -> tuple[int, int]:
+    if any(s < 1 or s % 2 == 0 for s in size) or size[0] * size[1] > CENSUS_MAX_PIXELS:
+        raise must(f"be two odd sizes (height, width) covering at most {CENSUS_MAX_PIXELS} pixels")
+    return size
+
+
 class StereoSgmParams(Section):
     """``stereo.sgm``: our semi-global matching (:func:`cvpipe.stereo.disparity_sgm`)."""
 
-    census_size: tuple[int, int] = (5, 7)
-    ad_weight: float = Field(0.5, ge=0.0)
+    census_size: Annotated[tuple[int, int], AfterValidator(_census_window)] = (5, 7)
+    # the matching cost is stored in 8 bits: hamming + ad_weight * min(AD, ad_trunc) <= 255
+    ad_weight: float = Field(0.5, ge=0.0, le=255.0)
     ad_trunc: int = Field(20, ge=1, le=255)
     paths: Literal[4, 8] = 8  # the kernels aggregate 4 or 8 directions only
     p1: int = Field(15, ge=1, le=4095)
@@ -336,13 +369,19 @@ class StereoSgmParams(Section):
     fill: bool = False
 
 
+#: OpenCV's ``uniquenessRatio``: a margin in percent (OpenCV refuses a negative one)
+Uniqueness = Annotated[int, Field(ge=0, le=100)]
+#: OpenCV's ``speckleRange``: a disparity step in pixels, at most the largest disparity range
+SpeckleRange = Annotated[int, Field(ge=0, le=4096)]
+
+
 class StereoBmParams(Section):
     """``stereo.opencv_bm``: OpenCV block matching (:func:`cvpipe.stereo.disparity_opencv_bm`)."""
 
     block_size: int = Field(15, ge=5, le=255)
-    uniqueness: int = 15
-    speckle_size: int = 100
-    speckle_range: int = 2
+    uniqueness: Uniqueness = 15
+    speckle_size: int = Field(100, ge=0)
+    speckle_range: SpeckleRange = 2
 
 
 class StereoSgbmParams(Section):
@@ -350,10 +389,10 @@ class StereoSgbmParams(Section):
 
     mode: Literal["sgbm", "hh", "sgbm_3way", "hh4"] = "sgbm"
     block_size: int = Field(3, ge=1, le=11)
-    uniqueness: int = 10
-    speckle_size: int = 100
-    speckle_range: int = 2
-    lr_max_diff: int = 1
+    uniqueness: Uniqueness = 10
+    speckle_size: int = Field(100, ge=0)
+    speckle_range: SpeckleRange = 2
+    lr_max_diff: int = 1  # OpenCV's disp12MaxDiff: a negative one disables the left-right check
 
 
 class StereoRectifyParams(FeaturesParams):
@@ -363,7 +402,7 @@ class StereoRectifyParams(FeaturesParams):
     ratio: Ratio = 0.8
     threshold: float = Field(1.0, gt=0.0, le=100.0)
     margin: float = Field(1.0, ge=0.0, le=1000.0)
-    seed: int = Field(0, ge=0)
+    seed: Seed = 0
     rectified_max_dy: float = Field(1.0, gt=0.0, le=100.0)
     rectified_share: float = Field(0.75, gt=0.0, le=1.0)
 

@@ -1,9 +1,18 @@
 """The machinery of :mod:`cvpipe.params`: the :class:`Section` base model, :class:`Bound`, the one-line messages
-and the reading of ``params.yaml`` (the sections themselves are declared in :mod:`cvpipe.params`)."""
+and the reading of ``params.yaml`` (the sections themselves are declared in :mod:`cvpipe.params`).
+
+Two rules hold for every field of every section, so that no value reaches OpenCV or a compiled kernel that they
+cannot take: a float is finite (NaN and the infinities are refused unless the field says ``Field(allow_inf_nan=
+True)``), and an integer fits a C ``int`` (:data:`INT_MIN` .. :data:`INT_MAX`) on each side where its field
+declares no limit of its own. :func:`check_field` applies one field's declarations alone: the command-line flags
+that set a field go through it (:func:`cvpipe.commands.add_param_options`).
+"""
 
 from __future__ import annotations
 
+import copy
 import dataclasses
+import functools
 import operator
 import os
 import typing
@@ -12,7 +21,7 @@ from typing import Any, Literal, TypeVar
 
 import annotated_types
 import yaml
-from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, ValidationError, create_model, field_validator, model_validator
 from pydantic_core import PydanticCustomError
 
 from ..errors import InputError
@@ -20,6 +29,10 @@ from ..errors import InputError
 T = TypeVar("T")
 
 _OPS = {">=": operator.ge, ">": operator.gt, "<=": operator.le}
+
+#: the range of an integer parameter on a side where its field declares no limit: a C ``int``, what OpenCV and the
+#: compiled kernels take (a field that is passed on as a wider integer declares its own limit)
+INT_MIN, INT_MAX = -(2**31), 2**31 - 1
 
 
 @dataclasses.dataclass(frozen=True)
@@ -35,10 +48,11 @@ class Bound:
 
 
 class Section(BaseModel):
-    """Base of every ``params.yaml`` section: frozen, unknown keys refused, strict types, :class:`Bound` checked."""
+    """Base of every ``params.yaml`` section: frozen, unknown keys refused, strict types, :class:`Bound` checked,
+    floats finite and integers within a C ``int`` (see the module docstring)."""
 
     # defer_build: a section's validator is built on its first use, so a command pays only for the sections it uses
-    model_config = ConfigDict(frozen=True, extra="forbid", strict=True, defer_build=True)
+    model_config = ConfigDict(frozen=True, extra="forbid", strict=True, defer_build=True, allow_inf_nan=False)
 
     def __init__(self, /, **data: Any) -> None:
         try:
@@ -57,6 +71,16 @@ class Section(BaseModel):
         choices = _choices(cls.model_fields[info.field_name].annotation)
         if choices and value is not None and not any(type(value) is type(c) and value == c for c in choices):
             raise PydanticCustomError("literal_error", "not one of the choices", {"expected": str(choices)})
+        return value
+
+    @field_validator("*", mode="after")
+    @classmethod
+    def _c_int(cls, value: Any, info: Any) -> Any:
+        """An integer within :data:`INT_MIN` .. :data:`INT_MAX` on the sides its field leaves open."""
+        if type(value) is int:
+            lo, hi = _int_limits(cls.model_fields[info.field_name])
+            if not lo <= value <= hi:
+                raise PydanticCustomError("int_range", "not a C int")
         return value
 
     @model_validator(mode="after")
@@ -120,10 +144,24 @@ def section_or_default(params: Any, cls: type[T], section: str) -> T:
     return params
 
 
+def _int_limits(info: Any) -> tuple[int | float, int | float]:
+    """The (lo, hi) that the C ``int`` rule sets for an integer field: :data:`INT_MIN` / :data:`INT_MAX` on a side
+    the field leaves open, none (an infinity) on a side where it declares its own limit, which pydantic checks."""
+    lo: int | float = INT_MIN
+    hi: int | float = INT_MAX
+    for m in info.metadata:
+        if isinstance(m, (annotated_types.Gt, annotated_types.Ge)):
+            lo = -float("inf")
+        elif isinstance(m, (annotated_types.Lt, annotated_types.Le)):
+            hi = float("inf")
+    return lo, hi
+
+
 def _range(info: Any, bound: Bound | None = None, limit: Any = None) -> str:
-    """``"[0, 1.0]"``, ``"(0.0, inf]"``... from a field's ``Field`` limits, ``bound`` (set to ``limit``) replacing the
-    side it sets."""
-    lo, hi = "[-inf", "inf]"
+    """``"[0, 1.0]"``, ``"(0.0, inf)"``, ``"[1, 2147483647]"``... from a field's ``Field`` limits (an integer's open
+    side is the C ``int``'s, a float's is infinite and excluded), ``bound`` (set to ``limit``) replacing the side it
+    sets."""
+    lo, hi = ("[-2147483648", "2147483647]") if info.annotation is int else ("(-inf", "inf)")
     for m in info.metadata:
         if isinstance(m, annotated_types.Gt):
             lo = f"({m.gt!r}"
@@ -152,8 +190,10 @@ def _choices(tp: Any) -> list | None:
 
 _TYPE_WORDS = {
     "int_type": "an integer", "int_from_float": "an integer", "float_type": "a number", "bool_type": "true or false",
-    "string_type": "a string", "tuple_type": "a list", "list_type": "a list",
+    "string_type": "a string", "tuple_type": "a list", "list_type": "a list", "finite_number": "a finite number",
 }
+#: the error kinds of a value outside a field's range
+_RANGE_KINDS = ("bound", "greater_than", "greater_than_equal", "less_than", "less_than_equal", "int_range")
 
 
 def _message(cls: type[BaseModel], exc: ValidationError, section: str, data: Any) -> str:
@@ -179,7 +219,7 @@ def _message(cls: type[BaseModel], exc: ValidationError, section: str, data: Any
             key = f"{key}.{part}" if key else part
     if kind == "extra_forbidden":
         return f"unknown key `{key}` in params; expected one of: {', '.join(sorted(model.model_fields))}"
-    if kind in ("bound", "greater_than", "greater_than_equal", "less_than", "less_than_equal"):
+    if kind in _RANGE_KINDS:
         bound = next((b for b in info.metadata if isinstance(b, Bound)), None)
         if bound is None:
             return f"`{key}` must be in {_range(info)}, got {value!r}"
@@ -199,7 +239,49 @@ def _message(cls: type[BaseModel], exc: ValidationError, section: str, data: Any
         return f"`{key}` must be {_TYPE_WORDS[kind]}, got {value!r}"
     if kind == "model_type" and info is not None:
         return f"`{key}` must be a {ctx.get('class_name', 'section')}, got {type(value).__name__}"
+    if kind == "must":  # a field's own check (:func:`must`) says what it accepts
+        return f"`{key}` {err['msg']}, got {list(value) if isinstance(value, tuple) else value!r}"
     return f"`{key}`: {err['msg']}, got {value!r}"
+
+
+def must(accepts: str) -> PydanticCustomError:
+    """The error a field's own check raises (an ``AfterValidator`` in its annotation); ``accepts`` completes "`key`
+    must ...", and the message adds the value (a tuple as a list, as params.yaml writes it): ``must("be two odd
+    sizes ...")`` -> "`stereo.sgm.census_size` must be two odd sizes ..., got [4, 5]"."""
+    return PydanticCustomError("must", "must " + accepts.replace("{", "{{").replace("}", "}}"))
+
+
+@functools.cache
+def _one_field(cls: type[Section], name: str) -> type[Section]:
+    """A section of the field ``name`` of ``cls`` alone, with its type, limits and own checks but no :class:`Bound`
+    (the limit another field sets)."""
+    field = copy.copy(cls.model_fields[name])
+    # the FieldInfo itself, not an Annotated type: typing caches those by equality, and Ge(0) would show Ge(0.0)
+    field.metadata = [m for m in field.metadata if not isinstance(m, Bound)]
+    return create_model(f"{cls.__name__}_{name}", __base__=Section, **{name: (field.annotation, field)})
+
+
+def check_field(cls: type[Section], name: str, value: Any) -> Any:
+    """``value`` checked by the declarations of field ``name`` of the section ``cls`` alone: its type, its range and
+    choices, its own checks and the two rules of every field (finite floats, C ``int`` integers); a limit that
+    another field sets (:class:`Bound`) is checked when the section is built.
+
+    Raises
+    ------
+    InputError
+        One line naming ``name`` and what it accepts.
+
+    Examples
+    --------
+    >>> from cvpipe.params import HoughLinesParams
+    >>> check_field(HoughLinesParams, "threshold", 120)
+    120
+    >>> check_field(HoughLinesParams, "threshold", 2**32)
+    Traceback (most recent call last):
+    ...
+    cvpipe.errors.InputError: `threshold` must be in [1, 2147483647], got 4294967296
+    """
+    return getattr(_one_field(cls, name)(**{name: value}), name)
 
 
 def from_mapping(cls: type[T], mapping: Any, section: str) -> T:
