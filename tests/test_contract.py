@@ -131,7 +131,7 @@ def test_unexpected_exception_is_one_line_exit_1(capsys, monkeypatch, views):
 
 
 def test_terminal_colour_codes_of_a_library_message_are_dropped(capsys, monkeypatch, views):
-    """A library error coloured for a terminal (numba's TypingError was) is plain text in the line and the record."""
+    """A library error coloured for a terminal (ANSI codes in its text) is plain text in the line and the record."""
     def coloured(*a, **k):
         raise TypeError("\x1b[1m\x1b[1mNo implementation of function\x1b[0m\n\x1b[0m\x1b[1m(int64)\x1b[0m")
 
@@ -699,7 +699,7 @@ def test_homography_command_on_unrelated_images_is_exit_1_with_counts(capsys, tm
 
 
 @pytest.mark.parametrize("argv, expected", [
-    # beyond int64 (numba's TypingError, or an OverflowError, before); beyond a C int (OpenCV's own words before)
+    # beyond int64 and beyond a C int: the flag's own range, whatever the library underneath would have said
     (["hough", "{a}", "--threshold", "1180591620717411303424"],
      "hough: `--threshold` must be in [1, 2147483647], got 1180591620717411303424"),
     (["hough", "{a}", "--method", "opencv", "--threshold", "4294967297"],
