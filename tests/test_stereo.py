@@ -140,7 +140,7 @@ def test_textureless_window():
 def test_census_signatures_match_a_per_neighbour_reference(window):
     """Signatures of every row against one neighbour at a time in numpy: bit set where the neighbour is darker, the
     first neighbour in row-major order in the highest bit (windows of 2, 8, 14, 34, 62 and 0 bits)."""
-    from cvpipe.stereo._kernels import _census_row
+    from cvpipe.stereo._sgm import census_row
 
     ry, rx = window[0] // 2, window[1] // 2
     img = np.random.default_rng(3).integers(0, 256, (23, 41), dtype=np.uint8)
@@ -153,9 +153,9 @@ def test_census_signatures_match_a_per_neighbour_reference(window):
             if (dy, dx) != (ry, rx):
                 darker = padded[dy:dy + h, dx:dx + w] < img
                 expected = (expected << np.uint64(1)) | darker.astype(np.uint64)
-    row, byte = np.empty(w, np.uint64), np.empty(w, np.uint8)
+    row = np.empty(w, np.uint64)
     for y in range(h):
-        _census_row(padded, y, ry, rx, row, byte)
+        census_row(padded, y, ry, rx, row)
         np.testing.assert_array_equal(row, expected[y])
 
 
@@ -184,8 +184,111 @@ def _speckle_reference(disp, max_size, max_jump):
     return out
 
 
+def _sgm_reference(left, right, nd, census, paths, uniqueness, subpixel, lr_max_diff, p2_tau,
+                   ad_weight=0.5, ad_trunc=20, p1=15, p2=150):
+    """Semi-global matching written out plainly in Python integers (the kernels' int16 / uint16 arithmetic never
+    overflows): -1 where rejected, before the textureless mask and the speckles."""
+    gray = (lambda im: im if im.ndim == 2 else cv2.cvtColor(im, cv2.COLOR_BGR2GRAY))  # noqa: E731
+    gl, gr = gray(left).astype(np.int64), gray(right).astype(np.int64)
+    h, w = gl.shape
+    ry, rx = census[0] // 2, census[1] // 2
+
+    def signatures(g):
+        pad = np.pad(g, ((ry, ry), (rx, rx)), mode="edge")
+        sig = np.zeros((h, w), np.int64)
+        for dy in range(2 * ry + 1):
+            for dx in range(2 * rx + 1):
+                if (dy, dx) != (ry, rx):
+                    sig = (sig << 1) | (pad[dy:dy + h, dx:dx + w] < g)
+        return sig
+
+    sl, sr = signatures(gl), signatures(gr)
+    cl, cr = left.reshape(h, w, -1).astype(np.int64), right.reshape(h, w, -1).astype(np.int64)
+    ad_mult = round(ad_weight / cl.shape[2] * 65536)
+    ad_cap = ad_trunc * cl.shape[2]
+    cost = np.full((h, w, nd), census[0] * census[1] - 1 + ((ad_cap * ad_mult) >> 16), np.int64)
+    for x in range(w):
+        for d in range(min(nd, x + 1)):
+            ad = np.minimum(np.abs(cl[:, x] - cr[:, x - d]).sum(axis=1), ad_cap)
+            cost[:, x, d] = [bin(v).count("1") for v in sl[:, x] ^ sr[:, x - d]] + ((ad * ad_mult) >> 16)
+    lut = np.full(256, p2) if p2_tau == 0 else np.floor(p2 * p2_tau / (p2_tau + np.arange(256)))
+    lut = np.maximum(lut, p1 + 1).astype(np.int64)
+    dirs = [(0, 1), (0, -1), (1, 0), (-1, 0)] + ([(1, 1), (1, -1), (-1, 1), (-1, -1)] if paths == 8 else [])
+    total = np.zeros((h, w, nd), np.int64)
+    for dy, dx in dirs:
+        L = np.zeros((h, w, nd), np.int64)
+        for y in range(h) if dy >= 0 else range(h - 1, -1, -1):
+            for x in range(w) if dx >= 0 else range(w - 1, -1, -1):
+                py, px = y - dy, x - dx
+                if not (0 <= py < h and 0 <= px < w):
+                    L[y, x] = cost[y, x]
+                    continue
+                prev = L[py, px]
+                near = np.minimum(np.r_[1 << 40, prev[:-1]], np.r_[prev[1:], 1 << 40]) + p1
+                v = np.minimum(np.minimum(prev, near), prev.min() + lut[abs(gl[y, x] - gl[py, px])])
+                L[y, x] = cost[y, x] + v - prev.min()
+        total += L
+    disp = np.full((h, w), -1.0, np.float32)
+    for y in range(h):
+        right_winner = [min((total[y, xr + d, d], d) for d in range(nd) if xr + d < w)[1] for xr in range(w)]
+        for x in range(w):
+            s = total[y, x, :min(nd, x + 1)]
+            bd, m = int(np.argmin(s)), int(s.min())
+            if uniqueness > 0 and any(abs(d - bd) > 1 and s[d] < m * (1.0 + uniqueness) for d in range(len(s))):
+                continue
+            disp[y, x] = bd
+            if subpixel and 0 < bd < len(s) - 1:
+                cm, cp = float(s[bd - 1]), float(s[bd + 1])
+                if cm - 2.0 * m + cp > 0:
+                    disp[y, x] = np.float32(bd + 0.5 * (cm - cp) / (cm - 2.0 * m + cp))
+        for x in range(w):
+            d = disp[y, x]
+            ends = {int(d), int(d) + (d > int(d))}
+            if d >= 0 and lr_max_diff >= 0 and not any(x >= k and abs(k - right_winner[x - k]) <= lr_max_diff
+                                                       for k in ends):
+                disp[y, x] = -1.0
+    return disp
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_sgm_matches_a_plain_reference(seed):
+    """Bit for bit, on small random pairs (gray and colour, 4 and 8 paths, every option of the winner)."""
+    rng = np.random.default_rng(seed)
+    h, w = int(rng.integers(6, 14)), int(rng.integers(12, 26))
+    nd = int(rng.integers(2, 18 if seed % 4 else w - 1))
+    base = rng.integers(0, 256, (h, w + nd) + ((3,) if seed % 2 else ()), dtype=np.uint8)
+    shift = int(rng.integers(0, nd))
+    left, right = np.ascontiguousarray(base[:, nd:]), np.ascontiguousarray(base[:, nd - shift:nd - shift + w])
+    opts = dict(census_size=((3, 5), (5, 7), (1, 3))[seed % 3], paths=(8, 4)[seed % 2 if seed < 4 else 0],
+                uniqueness=(0.0, 0.1)[seed // 4], subpixel=seed % 3 != 1, lr_max_diff=(2.0, -1.0, 0.5)[seed % 3],
+                p2_tau=(16.0, 0.0)[seed % 5 == 0])
+    expected = _sgm_reference(left, right, nd, opts["census_size"], opts["paths"], opts["uniqueness"],
+                              opts["subpixel"], opts["lr_max_diff"], opts["p2_tau"])
+    expected[stereo.textureless(left if left.ndim == 2 else cv2.cvtColor(left, cv2.COLOR_BGR2GRAY),
+                                opts["census_size"])] = -1.0
+    expected[expected < 0] = np.nan
+    got = stereo.disparity_sgm(left, right, nd, speckle_size=0, **opts)
+    assert got.tobytes() == expected.tobytes()
+
+
+def test_sgm_rows_finished_from_both_stored_sums():
+    """The two sweeps usually finish a row as the second one reaches it; the path where both stored it first (a rare
+    race of the threads) gives the same map."""
+    from cvpipe.stereo import _sgm
+
+    left, right, _ = random_dot_pair(two_planes, h=41, w=97)
+    gl_pad = cv2.copyMakeBorder(left, 2, 2, 3, 3, cv2.BORDER_REPLICATE)
+    gr_pad = cv2.copyMakeBorder(right, 2, 2, 3, 3, cv2.BORDER_REPLICATE)
+    lut = np.full(256, 150, np.int16)
+    flat = np.zeros(left.shape, np.uint8)
+    for nd, nk in ((16, 3), (24, 1), (64, 3), (80, 3)):
+        args = (left, gl_pad, gr_pad, 2, 3, left[..., None], right[..., None], 20, 32768, 44, nd, nk, 15, lut, 0.1,
+                True, 1.0, flat)
+        assert _sgm.disparity(*args).tobytes() == _sgm.disparity(*args, deferred=True).tobytes()
+
+
 def test_speckle_removal_rejects_small_regions_only():
-    from cvpipe.stereo._kernels import _remove_speckles
+    from cvpipe.stereo._sgm import remove_speckles
 
     d = np.full((6, 8), 5.0, np.float32)
     d[1, 1:3] = 9.0  # a 2-pixel island: removed
@@ -194,7 +297,7 @@ def test_speckle_removal_rejects_small_regions_only():
     d[1, 6] = 5.5  # within the jump of the plane around it: kept
     d[5, 0] = 20.0  # a single pixel: removed
     out = d.copy()
-    _remove_speckles(out, 3, 1.0)
+    remove_speckles(out, 3, 1.0)
     expected = d.copy()
     expected[1, 1:3] = -1.0
     expected[5, 0] = -1.0
@@ -204,7 +307,7 @@ def test_speckle_removal_rejects_small_regions_only():
 @pytest.mark.parametrize("max_size, max_jump", [(3, 1.0), (6, 0.0), (40, 2.0)])
 def test_speckle_removal_matches_a_flood_fill(max_size, max_jump):
     """Random maps of few levels (many regions that touch, merge late and wind around each other)."""
-    from cvpipe.stereo._kernels import _remove_speckles
+    from cvpipe.stereo._sgm import remove_speckles
 
     rng = np.random.default_rng(7)
     for _ in range(150):
@@ -212,7 +315,7 @@ def test_speckle_removal_matches_a_flood_fill(max_size, max_jump):
         d = rng.integers(-1, 4, (h, w)).astype(np.float32)
         d[d < 0] = -1.0
         out = d.copy()
-        _remove_speckles(out, max_size, max_jump)
+        remove_speckles(out, max_size, max_jump)
         np.testing.assert_array_equal(out, _speckle_reference(d, max_size, max_jump))
 
 

@@ -7,7 +7,7 @@
   (``rectify_uncalibrated``, ``rectify_calibrated``, ``warp_pair``);
 - :mod:`~cvpipe.stereo.pipeline`: the per-pair rectify step of the pipeline (``rectify_pair``);
 - :mod:`~cvpipe.stereo.sgm`: our semi-global matching (``disparity_sgm``, ``fill_invalid``, ``textureless``), whose
-  numba kernels are in :mod:`~cvpipe.stereo._kernels`;
+  compiled kernels are in ``cvpipe.stereo._sgm`` (those of the fundamental matrix in ``_epipolar``);
 - :mod:`~cvpipe.stereo.opencv_baseline`: OpenCV's block matching and SGBM (``disparity_opencv_bm``,
   ``disparity_opencv_sgbm``);
 - :mod:`~cvpipe.stereo.methods`: the registry of the disparity methods, ours and OpenCV's (``METHODS``,

@@ -192,7 +192,7 @@ def rectify_item(item: tuple, p) -> tuple[RectifiedPair, float]:
     return got, time.perf_counter() - t0
 
 
-#: rows of a worker's first pair run once before its timed call (numba cache load / compilation, allocations)
+#: rows of a worker's first pair run once before its timed call (the first call's one-off costs: imports, thread start)
 WARMUP_ROWS = 16
 _warm: set[str] = set()  # the methods this process has warmed up
 
@@ -214,7 +214,7 @@ def disparity_item(item: tuple, shared: tuple) -> tuple[np.ndarray, dict[str, fl
     (ndarray, dict)
         The float32 disparity (NaN = none) and this item's wall times: ``disparity`` and, on the first pair a
         process computes with ``method``, ``warmup`` (a run on the first :data:`WARMUP_ROWS` rows, so that the
-        timed call excludes the numba cache load).
+        timed call excludes the first call's one-off costs).
 
     Raises
     ------

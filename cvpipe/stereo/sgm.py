@@ -10,8 +10,8 @@ absolute-difference) matching cost, cost aggregation along 8 (or 4) scanline dir
 P2 shrinks across intensity edges, winner-take-all with a uniqueness test, a parabola through the aggregated costs for
 sub-pixel disparity, a left-right consistency check on the same cost volume, rejection of the pixels whose census
 window is flat (nothing to match on) and removal of small speckles.
-All per-pixel work runs in the numba kernels of :mod:`._kernels` (``cache=True``; ``parallel=True`` where scanlines
-are independent), imported on the first call so that importing the package does not import numba.
+All per-pixel work runs in the compiled kernels of :mod:`._sgm` (Cython with AVX2 intrinsics; the two vertical sweeps
+on two OpenMP threads), which only compute: this module validates and documents.
 """
 
 from __future__ import annotations
@@ -21,11 +21,14 @@ import numpy as np
 
 from ..errors import check_int, check_memory
 from ..params import StereoSgmParams
+from . import _sgm
 
 #: most bits a census signature can hold (uint64)
 _CENSUS_BITS = 64
 #: supported numbers of aggregation directions (4: horizontal and vertical; 8: also the diagonals)
 _PATHS = (4, 8)
+#: most disparities: the kernels index disparities in int16 SIMD lanes
+_MAX_DISP = 32767
 #: the ``stereo.sgm`` defaults, the one declaration of :func:`disparity_sgm`'s keyword defaults
 _SGM = StereoSgmParams()
 
@@ -146,9 +149,8 @@ def disparity_sgm(
     ValueError
         Bad images (different sizes, gray mixed with colour, not uint8) or a parameter out of range.
     """
-    from ._kernels import _aggregate, _cost_volume, _fill_background, _remove_speckles, _winner
-
     _check_pair(left, right, max_disp)
+    check_int("max_disp", max_disp, 1, _MAX_DISP)
     if len(census_size) != 2 or any(int(s) != s or s < 1 or s % 2 == 0 for s in census_size):
         raise ValueError(f"`census_size` must be two odd positive integers (height, width), got {census_size}")
     if census_size[0] * census_size[1] - 1 > _CENSUS_BITS:
@@ -173,8 +175,9 @@ def disparity_sgm(
         raise ValueError(f"`speckle_range` must be >= 0, got {speckle_range}")
 
     h, w = left.shape[:2]
-    # cost (uint8) + the two aggregated volumes (uint16) per pixel and disparity, and ~40 bytes per pixel of
-    # disparity maps and speckle buffers: checked before anything is allocated
+    # the cost volume (uint8) + the two sweeps' volumes of path sums (uint16, each sweep writes the rows it reaches
+    # first, together about one volume) per pixel and disparity, and ~40 bytes per pixel of disparity maps and
+    # speckle buffers: checked before anything is allocated
     check_memory(float(h) * w * (5 * int(max_disp) + 40), f"semi-global matching of {w}x{h} pixels x {max_disp} "
                  "disparities", "lower `--max-disp` or downscale both images (disparities scale with the image)")
     gl, gr = _gray(left), _gray(right)
@@ -188,42 +191,28 @@ def disparity_sgm(
     ad_max = (ad_cap * ad_mult) >> 16
     bits = census_size[0] * census_size[1] - 1
     c_max = bits + ad_max
-    # the cost volume is uint8; then every path cost is below 255 + p2 <= 4351 (int16 buffers, _BIG = 16000) and
-    # the sum of 8 paths below 65535 (uint16 volumes)
+    # the cost volume is uint8; then every path cost is below 255 + p2 <= 4351 (int16 lanes, SGM_BIG = 16000) and
+    # the sum of 8 paths below 65535 (uint16)
     if c_max > 255:
         raise ValueError(f"`ad_weight` * `ad_trunc` too large: the matching cost {bits} + {ad_max} "
                          "must stay <= 255")
-    gl_pad = np.pad(gl, ((ry, ry), (rx, rx)), mode="edge")
-    gr_pad = np.pad(gr, ((ry, ry), (rx, rx)), mode="edge")
-    # the three volumes are one numpy allocation, for which numpy asks the kernel for huge pages (numba's allocator
-    # does not): with 4 KiB pages, first-touch page faults on the tens of MB of volumes cost a sizeable share of the
-    # run time, and one mapping instead of three took 25.0-26.2 instead of 25.9-28.6 ms on teddy and cones
-    h, w = gl.shape
-    shape = (h, w, int(max_disp))
-    size = h * w * int(max_disp)
-    n = (size + 63) // 64 * 64  # each volume starts on a 64-byte boundary
-    volumes = np.empty(5 * n, np.uint8)
-    cost = volumes[:size].reshape(shape)
-    _cost_volume(gl_pad, gr_pad, ry, rx, planes_l, planes_r, np.int32(ad_cap), np.int32(ad_mult), np.uint8(c_max),
-                 cost)
+    gl_pad = cv2.copyMakeBorder(gl, ry, ry, rx, rx, cv2.BORDER_REPLICATE)  # the census window's border: edge pixels
+    gr_pad = cv2.copyMakeBorder(gr, ry, ry, rx, rx, cv2.BORDER_REPLICATE)
     steps = np.arange(256, dtype=np.float64)
     p2_lut = np.full(256, p2, np.float64) if p2_tau == 0 else np.floor(p2 * p2_tau / (p2_tau + steps))
     p2_lut = np.maximum(p2_lut, p1 + 1).astype(np.int16)
-    down = volumes[n:3 * n].view(np.uint16)[:size].reshape(shape)
-    up = volumes[3 * n:].view(np.uint16)[:size].reshape(shape)
-    _aggregate(cost, gl, 3 if paths == 8 else 1, np.int16(p1), p2_lut, down, up)
-    # the left-right check runs row by row inside _winner (a negative lr_max_diff disables it)
-    disp, _ = _winner(cost, down, up, gl, np.int16(p1), p2_lut, float(uniqueness), bool(subpixel),
-                      float(lr_max_diff))
-    del cost, down, up, volumes
     # the paths would carry a disparity into a flat window from wherever there is texture (all of a uniform pair
-    # would get one): without texture of its own a pixel has no estimate to trust
-    disp[textureless(gl, census_size)] = -1.0
+    # would get one): without texture of its own a pixel has no estimate to trust (rejected as its row is finished)
+    flat = textureless(gl, census_size).view(np.uint8)
+    disp = _sgm.disparity(gl, gl_pad, gr_pad, ry, rx, planes_l, planes_r, ad_cap, ad_mult, c_max, int(max_disp),
+                          3 if paths == 8 else 1, int(p1), p2_lut, float(uniqueness), bool(subpixel),
+                          float(lr_max_diff), flat)  # -1 = rejected
     if speckle_size > 0:
-        _remove_speckles(disp, int(speckle_size), float(speckle_range))
+        _sgm.remove_speckles(disp, int(speckle_size), float(speckle_range), nan=not fill)  # then NaN = rejected
     if fill:
-        disp = _fill_background(disp)
-    disp[disp < 0] = np.nan
+        disp = _sgm.fill_background(disp)
+    if fill or speckle_size == 0:
+        disp[disp < 0] = np.nan
     return disp
 
 
@@ -243,13 +232,11 @@ def fill_invalid(disp: np.ndarray) -> np.ndarray:
     ndarray, (H, W) float32
         A filled copy.
     """
-    from ._kernels import _fill_background
-
     if disp.ndim != 2:
         raise ValueError(f"`disp` must be (H, W), got shape {disp.shape}")
     work = np.where(np.isfinite(disp), disp, -1.0).astype(np.float32)
     if (work[np.isfinite(disp)] < 0).any():
         raise ValueError("`disp` must not contain negative disparities")
-    out = _fill_background(work)
+    out = _sgm.fill_background(work)
     out[out < 0] = np.nan
     return out
