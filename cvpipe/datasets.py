@@ -5,7 +5,8 @@ each ``{"item", "reason"}``), so that nothing is skipped silently. Ground truth 
 carries its truth when the folder's ``truth.json`` (the bundled samples' format) names it, else ``None``. A truth
 file is read with a size limit (:data:`TRUTH_MAX_BYTES`) and every field it uses is checked for its type (a name
 is a non-empty string, a matrix or a list of lines, boxes or corners is finite numbers of its shape); a file that
-breaks this raises :class:`~cvpipe.errors.InputError` naming the file and the field (``probes[1].boxes``).
+breaks this raises :class:`~cvpipe.errors.InputError` naming the file and the field (``probes[1].boxes``). A name
+that is not UTF-8 anywhere in the folder is refused before anything is listed, naming the folder and the name.
 
 Layouts (any of png, jpg/jpeg, tif/tiff, bmp, webp, in any letter case):
 
@@ -33,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from .errors import InputError, check_int
-from .io import IMAGE_SUFFIXES, load_json, load_npz, read_text
+from .io import IMAGE_SUFFIXES, check_utf8_names, load_json, load_npz, read_text
 
 TRUTH_FILE = "truth.json"
 #: largest ``truth.json`` read, bytes (a truth file holds a few numbers per image)
@@ -47,9 +48,12 @@ def images_in(folder: Path) -> list[Path]:
 
 
 def _folder(folder: str | os.PathLike, task: str) -> Path:
+    """``folder`` as a Path, refused when it is no folder or holds a name that is not UTF-8
+    (:func:`cvpipe.io.check_utf8_names`: DVC cannot hash such a folder)."""
     d = Path(folder)
     if not d.is_dir():
         raise InputError(f"{d}: no such folder (the `{task}.data` parameter must name a folder of {task} images)")
+    check_utf8_names(d)
     return d
 
 

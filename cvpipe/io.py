@@ -7,11 +7,13 @@ destination folder and renames it, so an interrupted run never leaves a half-wri
 from __future__ import annotations
 
 import contextlib
+import errno
 import functools
 import json
 import os
 import re
 import secrets
+import threading
 import zipfile
 import zlib
 from pathlib import Path
@@ -103,6 +105,61 @@ def _looks_truncated(data: bytes) -> bool:
     return False
 
 
+#: the OpenCV log level in force before the first of the :func:`opencv_quiet` blocks still open, and their number
+_quiet_state = {"depth": 0, "level": None}
+_quiet_lock = threading.Lock()
+
+
+@contextlib.contextmanager
+def opencv_quiet() -> Iterator[None]:
+    """Keep OpenCV's own log lines (libtiff's ``[ WARN ] ... TIFFRGBAImageOK``) off stderr inside the block.
+
+    A file OpenCV cannot decode is our one-line error, which says more. OpenCV's log level is global: blocks open in
+    several threads at once share one silence, and the level in force before the first is restored when the last ends.
+    """
+    log = cv2.utils.logging
+    with _quiet_lock:
+        if _quiet_state["depth"] == 0:
+            _quiet_state["level"] = log.getLogLevel()
+            log.setLogLevel(log.LOG_LEVEL_SILENT)
+        _quiet_state["depth"] += 1
+    try:
+        yield
+    finally:
+        with _quiet_lock:
+            _quiet_state["depth"] -= 1
+            if _quiet_state["depth"] == 0:
+                log.setLogLevel(_quiet_state["level"])
+
+
+def _from_wide_samples(p: Path, data: bytes, raw: np.ndarray | None, mode: str) -> np.ndarray | None:
+    """The image OpenCV's 8-bit modes refused, from ``raw`` (decoded with ``IMREAD_UNCHANGED``): float samples in
+    [0, 1] scaled to 0..255 and rounded, as ``mode`` (gray or BGR) asks; None when ``raw`` is no image either.
+
+    Raises
+    ------
+    InputError
+        Float samples outside [0, 1], NaN or infinity, 32-bit integer samples, or a channel count other than 1, 3, 4.
+    """
+    if raw is None or raw.size == 0 or raw.dtype in (np.uint8, np.uint16):
+        return None
+    kind = "TIFF" if data[:4] in (b"II*\0", b"MM\0*") else "image"
+    bits = raw.dtype.itemsize * 8
+    if raw.dtype.kind != "f":
+        raise InputError(f"{p}: {bits}-bit integer {kind}: expected 8- or 16-bit samples")
+    expected = "expected 8- or 16-bit samples, or floats in [0, 1]"
+    channels = 1 if raw.ndim == 2 else raw.shape[2]
+    if channels not in (1, 3, 4):
+        raise InputError(f"{p}: {bits}-bit float {kind} with {channels} channels: expected 1, 3 or 4")
+    if not np.isfinite(raw).all():
+        raise InputError(f"{p}: {bits}-bit float {kind} holding NaN or infinity: {expected}")
+    lo, hi = float(raw.min()), float(raw.max())
+    if lo < 0.0 or hi > 1.0:
+        raise InputError(f"{p}: {bits}-bit float {kind} with values in [{lo:.4g}, {hi:.4g}]: {expected}")
+    img = np.rint(raw * 255.0).astype(np.uint8)
+    return to_gray(img) if mode == "gray" else to_bgr(img)
+
+
 def _about_file(fn):
     """Attach the path argument to the InputError that ``fn`` raises (the CLI's JSON record names it)."""
 
@@ -145,12 +202,17 @@ def read_image(path: str | os.PathLike, mode: str = "color", max_pixels: int = D
     Returns
     -------
     ndarray
-        The decoded image, upright: its EXIF orientation applied in every mode (:func:`orient`).
+        The decoded image, upright: its EXIF orientation applied in every mode (:func:`orient`). In ``color`` and
+        ``gray``, 16-bit samples are scaled to 8 bits (0..65535 to 0..255) and float samples (a float TIFF) are read
+        as fractions of full scale, 0..1 to 0..255 rounded (the convention of float images in OpenCV's ``imshow``
+        and scikit-image); no min-max stretch, which would give one scene other grey levels in every file.
 
     Raises
     ------
     InputError
-        Missing file, empty file, not an image, truncated file, too small or too many pixels.
+        Missing file, empty file, not an image, truncated file, too small or too many pixels; in ``color`` and
+        ``gray``, float samples outside [0, 1] (or NaN, infinity) and 32-bit integer samples, whose scale cvpipe does
+        not guess.
     """
     if mode not in _MODES:
         raise ValueError(f"`mode` must be one of {sorted(_MODES)}, got {mode!r}")
@@ -166,7 +228,12 @@ def read_image(path: str | os.PathLike, mode: str = "color", max_pixels: int = D
         )
     if _looks_truncated(data):
         raise InputError(f"{p}: truncated image file (end marker missing)")
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), _MODES[mode])
+    buf = np.frombuffer(data, np.uint8)
+    with opencv_quiet():
+        img = cv2.imdecode(buf, _MODES[mode])
+        if img is None and mode != "unchanged":
+            # OpenCV's 8-bit modes refuse float and 32-bit integer samples: what the file holds decides the answer
+            img = _from_wide_samples(p, data, cv2.imdecode(buf, cv2.IMREAD_UNCHANGED), mode)
     if img is None or img.size == 0:
         raise InputError(f"{p}: not a readable image (expected PNG, JPEG, BMP, TIFF, WebP or PGM/PPM)")
     img = orient(img, orientation)
@@ -252,6 +319,27 @@ def list_images(folder: str | os.PathLike) -> list[Path]:
     if not d.is_dir():
         raise InputError(f"{d}: no such folder")
     return sorted(p for p in d.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
+
+
+def check_utf8_names(folder: str | os.PathLike) -> None:
+    """Refuse a folder holding, at any depth, a file or folder whose name is not UTF-8.
+
+    Such a name (Latin-1 ``caf\\xe9.png``) reaches Python as a string with a lone surrogate, which no UTF-8 output
+    (JSON, ``dvc.lock``, the summary line) can hold: DVC's hashing of the data folder fails without naming it.
+
+    Raises
+    ------
+    InputError
+        ``"<folder>: the name b'caf\\xe9.png' is not UTF-8; rename it (names in a data folder must be UTF-8)"``,
+        the first such name in a top-down walk, shown as its bytes.
+    """
+    for top, dirs, files in os.walk(folder):
+        for name in sorted(dirs + files):
+            try:
+                name.encode("utf-8")
+            except UnicodeEncodeError:
+                raise InputError(f"{top}: the name {os.fsencode(name)!r} is not UTF-8; rename it (names in a data "
+                                 "folder must be UTF-8)", file=os.path.join(top, name)) from None
 
 
 #: marker in the names of our temporary files: ``.<name>.cvpipe-tmp-<pid>-<random><suffix>`` beside the output
@@ -391,18 +479,52 @@ def _temporary_beside(path: str | os.PathLike) -> Path:
         return candidate
 
 
+#: what a writer says of the OSErrors of a full disk or an exhausted quota (EDQUOT is absent on some systems)
+_NO_SPACE = {code: text for code, text in ((errno.ENOSPC, "no space left on device"),
+                                           (getattr(errno, "EDQUOT", None), "disk quota exceeded")) if code is not None}
+_TMP_PARTS = re.compile(r"^\.(?P<stem>.+)\.cvpipe-tmp-\d+-[0-9a-f]{8}(?P<suffix>\.[^.]*)?$")
+
+
+def _destination(path: Path) -> Path:
+    """The output file that ``path`` is written for: ``path`` itself, or the file a temporary of
+    :func:`_temporary_beside` becomes (through the temporaries of temporaries that nested writers make)."""
+    while (m := _TMP_PARTS.match(path.name)) is not None:
+        path = path.with_name(m["stem"] + (m["suffix"] or ""))
+    return path
+
+
+def _full_disk(exc: OSError, path: str | os.PathLike) -> InputError:
+    """The one line of a full disk or quota (``exc``), naming the output file ``path`` is written for: an InputError,
+    exit status 2, as the command can be rerun once there is room."""
+    dest = _destination(Path(path))
+    return InputError(f"{dest}: {_NO_SPACE[exc.errno]} while writing", file=str(dest))
+
+
+@contextlib.contextmanager
+def _naming_full_disk(path: str | os.PathLike) -> Iterator[None]:
+    """:func:`_full_disk` for an OSError of a full disk or quota inside the block; other errors pass."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.errno not in _NO_SPACE:
+            raise
+        raise _full_disk(exc, path) from exc
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success rename it to ``path``, on any failure delete it.
 
     The temporary (see :func:`_temporary_beside`) is removed on every exception, KeyboardInterrupt included; one
-    left by a killed process is removed by the next write into the same folder.
+    left by a killed process is removed by the next write into the same folder. A full disk or quota is one
+    InputError naming ``path`` (``"<path>: no space left on device while writing"``).
     """
     tmp_path = None
     try:
-        tmp_path = _temporary_beside(path)
-        yield tmp_path
-        os.replace(tmp_path, path)
+        with _naming_full_disk(path):
+            tmp_path = _temporary_beside(path)
+            yield tmp_path
+            os.replace(tmp_path, path)
     finally:
         if tmp_path is not None:
             with contextlib.suppress(OSError):
@@ -418,9 +540,17 @@ class OutputSet:
     def path(self, dest: str | os.PathLike) -> Path:
         """A temporary path beside ``dest`` with its suffix, to write ``dest``'s content to (with any writer of
         this module); it becomes ``dest`` when the whole set succeeds."""
-        tmp = _temporary_beside(dest)
+        with _naming_full_disk(dest):
+            tmp = _temporary_beside(dest)
         self._pending.append((tmp, Path(dest)))
         return tmp
+
+    def _writing(self, exc: OSError) -> Path | None:
+        """The destination whose temporary ``exc`` names, else the one handed out last (the file being written)."""
+        for tmp, dest in reversed(self._pending):
+            if exc.filename is not None and Path(os.fsdecode(exc.filename)) == tmp:
+                return dest
+        return self._pending[-1][1] if self._pending else None
 
     def _commit(self) -> None:
         for tmp, dest in self._pending:
@@ -439,7 +569,8 @@ def all_or_none() -> Iterator[OutputSet]:
     """Write several output files all or none: each is written to a temporary beside it (``outs.path(dest)``), and
     only when the block succeeds are they renamed, one after the other, to their names; on any failure (an
     exception, Ctrl-C) every temporary is deleted and the files already there are left untouched. One killed
-    process leaves only temporaries, which the next write into the folder removes.
+    process leaves only temporaries, which the next write into the folder removes. A full disk or quota is one
+    InputError naming the output file being written, not its temporary.
 
     Examples
     --------
@@ -449,8 +580,14 @@ def all_or_none() -> Iterator[OutputSet]:
     """
     outs = OutputSet()
     try:
-        yield outs
-        outs._commit()
+        try:
+            yield outs
+            outs._commit()
+        except OSError as exc:
+            dest = outs._writing(exc) if exc.errno in _NO_SPACE else None
+            if dest is None:
+                raise
+            raise _full_disk(exc, dest) from exc
     finally:
         outs._discard()
 

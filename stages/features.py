@@ -14,9 +14,11 @@ from stages._runner import Stage, run
 
 
 def images_under(root: Path) -> list[Path]:
-    """Image files anywhere under ``root`` (hidden files and folders skipped), sorted by relative path."""
+    """Image files anywhere under ``root`` (hidden files and folders skipped), sorted by relative path; a name that is
+    not UTF-8 anywhere under ``root`` is refused (:func:`cvpipe.io.check_utf8_names`)."""
     if not root.is_dir():
         raise InputError(f"{root}: no such folder")
+    io.check_utf8_names(root)
     return sorted(f for f in root.rglob("*") if f.is_file() and f.suffix.lower() in io.IMAGE_SUFFIXES
                   and not any(part.startswith(".") for part in f.relative_to(root).parts))
 

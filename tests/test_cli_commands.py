@@ -392,6 +392,47 @@ def test_verbose_logs_steps_and_quiet_silences_notes(workdir, capsys):
     assert "cvpipe: lines" not in capsys.readouterr().err  # steps are not logged by default
 
 
+def _grid(dtype, top) -> np.ndarray:
+    """A 64 x 64 grid of lines every 16 pixels at value ``top`` on 0."""
+    img = np.zeros((64, 64), dtype)
+    img[8::16] = top
+    img[:, 8::16] = top
+    return img
+
+
+def test_a_float_tiff_is_read_and_one_it_cannot_scale_is_the_one_line_with_no_opencv_line(tmp_path):
+    ok, deep = tmp_path / "grid.tif", tmp_path / "deep.tif"
+    assert cv2.imwrite(str(ok), _grid(np.float32, 1.0)) and cv2.imwrite(str(deep), _grid(np.float32, 255.0))
+    env = _env()
+    env.pop("OPENCV_LOG_LEVEL", None)  # OpenCV's default level, as in a user's shell (the suite sets ERROR)
+    proc = subprocess.run([sys.executable, "-m", "cvpipe", "hough", str(ok), str(deep), "--threshold", "40",
+                           "--json"], capture_output=True, text=True, env=env, cwd=ROOT)
+    assert proc.returncode == 2
+    assert proc.stderr == (f"cvpipe: error: {deep}: 32-bit float TIFF with values in [0, 255]: expected 8- or 16-bit "
+                           "samples, or floats in [0, 1]\n")
+    good, bad = json.loads(proc.stdout)
+    assert good["total"] >= 8 and "error" not in good and "error" in bad  # the 8 grid lines of the 0..1 image
+
+
+def test_a_full_disk_is_the_one_line_naming_the_output_being_written(tmp_path, monkeypatch, capsys):
+    import errno
+    import pathlib
+
+    img, out = tmp_path / "grid.png", tmp_path / "lines.png"
+    cv2.imwrite(str(img), _grid(np.uint8, 255))
+
+    def full(*args, **kwargs):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(pathlib.Path, "write_bytes", full)
+    assert cli.main(["hough", str(img), "--threshold", "40", "--overlay", str(out), "--json"]) == 2
+    cap = capsys.readouterr()
+    line = f"{out}: no space left on device while writing"
+    assert cap.err == f"cvpipe: error: {line}\n"
+    assert json.loads(cap.out) == {"error": line, "file": str(out), "exit": 2}
+    assert [p.name for p in tmp_path.iterdir()] == ["grid.png"]  # no overlay, no temporary
+
+
 # ------------------------------------------------------------------------------------------------ several logos
 
 

@@ -2,6 +2,8 @@
 one line naming the file and the record's field (``probes[1].verdict``)."""
 
 import json
+import os
+import re
 
 import numpy as np
 import pytest
@@ -171,3 +173,37 @@ def _stereo_truth(tmp_path, how):
 def test_a_damaged_stereo_truth_npz_names_the_file_and_the_array(tmp_path, how, message):
     with pytest.raises(InputError, match=message):
         datasets.read_stereo_truth(_stereo_truth(tmp_path, how), (30, 40))
+
+
+# --------------------------------------------------------------------------------------- names that are not UTF-8
+
+
+def _make_non_utf8(folder) -> None:
+    """Create ``folder/caf\\xe9.png`` (Latin-1 bytes), skipping the test where the file system refuses the name."""
+    os.makedirs(folder, exist_ok=True)
+    try:
+        os.close(os.open(os.path.join(os.fsencode(folder), b"caf\xe9.png"), os.O_WRONLY | os.O_CREAT, 0o644))
+    except (OSError, ValueError):
+        pytest.skip("this file system refuses names that are not UTF-8")
+
+
+@pytest.mark.parametrize("finder, where", [
+    ("hough", ""), ("homography", "pair"), ("defect", "probes"), ("logo", "scenes"), ("logo", "gallery/brand"),
+    ("stereo", "pair"), ("panorama", "set"),
+])
+def test_a_name_that_is_not_utf8_is_refused_naming_the_folder_and_the_name(tmp_path, finder, where):
+    folder = tmp_path / where
+    _make_non_utf8(folder)
+    # DVC cannot hash a data folder holding such a name; refused before anything runs, with the name's bytes shown
+    message = rf"^{re.escape(str(folder))}: the name {re.escape(repr(b'caf' + bytes([0xE9]) + b'.png'))} is not UTF-8"
+    with pytest.raises(InputError, match=message + r"; rename it \(names in a data folder must be UTF-8\)$"):
+        getattr(datasets, f"find_{finder}")(tmp_path)
+
+
+def test_the_features_stage_refuses_a_name_that_is_not_utf8(tmp_path):
+    from stages.features import images_under
+
+    _make_non_utf8(tmp_path / "gallery")
+    with pytest.raises(InputError, match=rf"^{re.escape(str(tmp_path / 'gallery'))}: the name b'caf\\xe9\.png' is "
+                                         "not UTF-8"):
+        images_under(tmp_path)

@@ -1,7 +1,10 @@
 """cvpipe.io: every validation branch names the file and says what was expected; writers are atomic."""
 
+import errno
 import json
 import os
+import pathlib
+import re
 
 import cv2
 import numpy as np
@@ -316,3 +319,109 @@ def test_fit_picture_leaves_a_small_picture_alone_and_never_exceeds_the_limit():
     assert io.picture_scale(200, 100, 5000) == pytest.approx(0.5)
     with pytest.raises(InputError, match=r"`max_pixels` must be an integer >= 1, got 0"):
         io.fit_picture(small, 0)
+
+
+# ------------------------------------------------------------------------------------------- float and wide TIFFs
+
+
+@pytest.fixture
+def opencv_warnings():
+    """OpenCV logging at its WARNING level, as a `cvpipe` command runs (the stages and this suite set ERROR)."""
+    log = cv2.utils.logging
+    before = log.getLogLevel()
+    log.setLogLevel(log.LOG_LEVEL_WARNING)
+    yield log.LOG_LEVEL_WARNING
+    log.setLogLevel(before)
+
+
+def test_a_float_tiff_in_0_1_reads_as_8_bit_with_nothing_on_stderr(tmp_path, opencv_warnings, capfd):
+    rng = np.random.default_rng(0)
+    gray32 = rng.random((24, 32)).astype(np.float32)
+    bgr64 = rng.random((24, 32, 3))
+    assert cv2.imwrite(str(tmp_path / "g.tif"), gray32) and cv2.imwrite(str(tmp_path / "c.tif"), bgr64)
+    gray = io.read_image(tmp_path / "g.tif", "gray")
+    # 0..1 maps to 0..255 rounded to the nearest level: half a level apart at most (and a float32 rounding)
+    assert gray.dtype == np.uint8 and gray.shape == (24, 32)
+    assert np.abs(gray - gray32 * 255.0).max() <= 0.5 + 1e-4
+    assert np.array_equal(io.read_image(tmp_path / "g.tif", "color"), cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR))
+    color = io.read_image(tmp_path / "c.tif", "color")
+    assert color.dtype == np.uint8 and np.abs(color - bgr64 * 255.0).max() <= 0.5 + 1e-9
+    assert np.array_equal(io.read_image(tmp_path / "c.tif", "gray"), cv2.cvtColor(color, cv2.COLOR_BGR2GRAY))
+    assert io.read_image(tmp_path / "g.tif", "unchanged").dtype == np.float32  # unchanged keeps the samples
+    assert capfd.readouterr().err == ""
+    assert cv2.utils.logging.getLogLevel() == opencv_warnings  # the level in force before the read is back
+
+
+@pytest.mark.parametrize("pixels, message", [
+    (np.linspace(0, 255, 24 * 32, dtype=np.float32).reshape(24, 32),
+     r"32-bit float TIFF with values in \[0, 255\]: expected 8- or 16-bit samples, or floats in \[0, 1\]"),
+    (np.where(np.eye(24, 32) > 0, np.nan, 0.5),
+     r"64-bit float TIFF holding NaN or infinity: expected 8- or 16-bit samples, or floats in \[0, 1\]"),
+    (np.full((24, 32), 70000, np.int32), r"32-bit integer TIFF: expected 8- or 16-bit samples"),
+    (np.full((24, 32), 7, np.uint32), r"32-bit integer TIFF: expected 8- or 16-bit samples"),
+], ids=["float32 0..255", "float64 NaN", "int32", "uint32"])
+def test_tiff_samples_that_are_not_scaled_are_one_line_naming_the_file(tmp_path, opencv_warnings, capfd, pixels,
+                                                                        message):
+    p = tmp_path / "wide.tif"
+    assert cv2.imwrite(str(p), pixels)
+    for mode in ("color", "gray"):
+        with pytest.raises(InputError, match=rf"^{re.escape(str(p))}: {message}$") as info:
+            io.read_image(p, mode)
+        assert info.value.file == str(p)
+    assert capfd.readouterr().err == ""  # no `[ WARN ] ... TIFFRGBAImageOK` line of OpenCV's
+    assert cv2.utils.logging.getLogLevel() == opencv_warnings
+
+
+def test_opencv_stays_quiet_until_the_last_of_concurrent_reads_ends(opencv_warnings):
+    log = cv2.utils.logging
+    with io.opencv_quiet():
+        with io.opencv_quiet():  # another thread's read, begun while the first one runs
+            assert log.getLogLevel() == log.LOG_LEVEL_SILENT
+        assert log.getLogLevel() == log.LOG_LEVEL_SILENT
+    assert log.getLogLevel() == opencv_warnings
+
+
+# ------------------------------------------------------------------------------------------------- a full disk
+
+
+def _full_disk(code):
+    def write(*args, **kwargs):
+        raise OSError(code, os.strerror(code))
+
+    return write
+
+
+NO_SPACE = [(errno.ENOSPC, "no space left on device"), (errno.EDQUOT, "disk quota exceeded")]
+# each writer with the low-level call that puts its bytes on the disk
+WRITERS = {
+    "json": ("out.json", lambda p: io.save_json(p, {"a": 1}), (pathlib.Path, "write_text")),
+    "image": ("out.png", lambda p: io.save_image(p, np.zeros((8, 8), np.uint8)), (pathlib.Path, "write_bytes")),
+    "npz": ("out.npz", lambda p: io.save_npz(p, a=np.arange(3)), (np.lib.format, "write_array")),
+}
+
+
+@pytest.mark.parametrize("code, says", NO_SPACE, ids=["ENOSPC", "EDQUOT"])
+@pytest.mark.parametrize("writer", sorted(WRITERS))
+def test_a_full_disk_is_one_line_naming_the_file_being_written(tmp_path, monkeypatch, writer, code, says):
+    name, write, (owner, low) = WRITERS[writer]
+    dest = tmp_path / name
+    dest.write_bytes(b"old")
+    monkeypatch.setattr(owner, low, _full_disk(code))
+    with pytest.raises(InputError, match=rf"^{re.escape(str(dest))}: {says} while writing$") as info:
+        write(dest)
+    assert info.value.file == str(dest)
+    assert dest.read_bytes() == b"old" and [p.name for p in tmp_path.iterdir()] == [name]  # no temporary left
+
+
+def test_a_full_disk_in_an_output_set_names_the_file_not_its_temporary(tmp_path, monkeypatch):
+    old = tmp_path / "a.json"
+    old.write_text("old")
+    monkeypatch.setattr(pathlib.Path, "write_bytes", _full_disk(errno.ENOSPC))
+    for name, write in (("b.png", lambda outs, p: io.save_image(outs.path(p), np.zeros((8, 8), np.uint8))),
+                        ("c.ply", lambda outs, p: outs.path(p).write_bytes(b"ply"))):
+        dest = tmp_path / name
+        with pytest.raises(InputError, match=rf"^{re.escape(str(dest))}: no space left on device while writing$"):
+            with io.all_or_none() as outs:
+                io.save_json(outs.path(old), {"a": 1})
+                write(outs, dest)
+        assert old.read_text() == "old" and [p.name for p in tmp_path.iterdir()] == ["a.json"]

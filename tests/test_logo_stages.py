@@ -176,3 +176,26 @@ def test_find_logo_maps_files_to_brands_and_drops_name_clashes(tmp_path, marks):
     # brand0.png would write the same features file as brand0.jpg; an empty brand folder is listed too
     assert [d["item"] for d in dropped] == ["gallery/brand0.png", "gallery/empty"]
     assert inputs.scenes[0].name == "s" and not inputs.scenes[0].labelled
+
+
+def test_the_stages_say_why_a_gallery_image_and_its_brand_are_not_used(tmp_path, marks):
+    from cvpipe import datasets, features, io
+    from cvpipe.logo.cached import load_gallery
+    from cvpipe.params import LogoFeaturesParams, LogoMatchParams
+
+    root, feats = tmp_path / "mine", tmp_path / "features"
+    flat = {level: np.full((64, 64, 3), level, np.uint8) for level in (200, 255)}
+    images = {"gallery/brand0.png": marks["brand0"], "gallery/blank.png": flat[200],
+              "gallery/brand1/front.png": marks["brand1"], "gallery/brand1/white.png": flat[255],
+              "scenes/s.png": marks["brand0"]}
+    for rel, img in images.items():
+        io.save_image(root / rel, img)
+        arrays, _ = features.detect_item((cv2.cvtColor(img, cv2.COLOR_BGR2GRAY), False), LogoFeaturesParams())
+        io.save_npz((feats / rel).with_suffix(".npz"), **arrays)
+    inputs, _ = datasets.find_logo(root)
+    gallery, dropped = load_gallery(inputs, root, feats, LogoMatchParams())
+    assert gallery.brands == ("brand0", "brand1")
+    # a blank image is named so; the brand it was the only image of is named as not used
+    assert dropped == [
+        {"item": "gallery/blank.png", "reason": "blank (one grey level, 200); brand 'blank' is not used"},
+        {"item": "gallery/brand1/white.png", "reason": "blank (one grey level, 255)"}]

@@ -447,6 +447,26 @@ def test_cli_gallery_without_features(tmp_path, capsys):
     assert "flat.png (0)" in capsys.readouterr().err
 
 
+def test_cli_notes_each_gallery_brand_and_image_it_does_not_use(tmp_path, gallery_dir, marks, capsys):
+    cv2.imwrite(str(gallery_dir / "blank.png"), np.full((64, 64), 200, np.uint8))
+    cv2.imwrite(str(gallery_dir / "brand1" / "white.png"), np.full((64, 64), 255, np.uint8))
+    (gallery_dir / "vacant").mkdir()
+    scene = tmp_path / "s.jpg"
+    cv2.imwrite(str(scene), _scene(marks["brand1"], _view((320, 240), 0.8, 10, PERSP)))
+    argv = ["logo", str(scene), "--gallery", str(gallery_dir), "--json"]
+    assert cli.main(argv) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)[0]["brand"] == "brand1"
+    assert err.splitlines() == [
+        f"cvpipe: note: gallery brand 'vacant' is not used: its folder {gallery_dir / 'vacant'} holds no images",
+        f"cvpipe: note: gallery brand 'blank' is not used: {gallery_dir / 'blank.png'}: blank (one grey level, 200)",
+        (f"cvpipe: note: gallery image {gallery_dir / 'brand1' / 'white.png'} of brand 'brand1' is not used: "
+         "blank (one grey level, 255)")]
+    assert cli.main(["-q", *argv]) == 0  # -q silences the notes, not the answer
+    out, err = capsys.readouterr()
+    assert err == "" and json.loads(out)[0]["brand"] == "brand1"
+
+
 def test_cli_bad_ratio(tmp_path, gallery_dir, capsys):
     assert cli.main(["logo", "x.jpg", "--gallery", str(gallery_dir), "--ratio", "1.5"]) == 2
     assert "`--ratio` must be in" in capsys.readouterr().err

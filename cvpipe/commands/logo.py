@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 
 from ..params import HomographyEstimateParams, LogoFeaturesParams, LogoMatchParams, LogoVerifyParams
 from . import (DETECTORS, add_feature_arguments, add_result_arguments, final_output,  # noqa: F401
-               overlay_paths, param_type, progress, read_images,
+               note, overlay_paths, param_type, progress, read_images,
                step)  # DETECTORS: the ``--method`` choices (a test keeps them equal)
 
 if TYPE_CHECKING:
@@ -24,7 +24,8 @@ SUFFIX = "_logo"
 
 
 def gallery_files(folder: str | Path) -> list[tuple[str, Path]]:
-    """``(brand, file)`` for ``DIR/<brand>.<ext>`` and ``DIR/<brand>/*.<ext>``, sorted.
+    """``(brand, file)`` for ``DIR/<brand>.<ext>`` and ``DIR/<brand>/*.<ext>``, sorted; a note names each brand
+    folder that holds no image.
 
     Raises
     ------
@@ -38,28 +39,78 @@ def gallery_files(folder: str | Path) -> list[tuple[str, Path]]:
     if not root.is_dir():
         raise InputError(f"{root}: gallery folder does not exist")
     items = [(f.stem, f) for f in io.list_images(root)]
+    empty = []
     for sub in sorted(p for p in root.iterdir() if p.is_dir()):
-        items += [(sub.name, f) for f in io.list_images(sub)]
+        found = io.list_images(sub)
+        items += [(sub.name, f) for f in found]
+        if not found and not sub.name.startswith("."):
+            empty.append(sub)
     if not items:
         raise InputError(f"{root}: the gallery is empty; expected {root}/<brand>.png or {root}/<brand>/*.png "
                          f"(any of {', '.join(io.IMAGE_SUFFIXES)})")
+    brands = {b for b, _ in items}
+    for sub in empty:
+        if sub.name not in brands:  # DIR/<brand>.png beside an empty DIR/<brand>/ still gives the brand
+            note(f"note: gallery brand {sub.name!r} is not used: its folder {sub} holds no images")
     return sorted(items, key=lambda t: (t[0], str(t[1])))
 
 
-def gallery_references(folder: str | Path, detector: str, max_features: int) -> list[logo.Reference]:
-    """Read and detect every reference of a gallery folder (see :func:`gallery_files`)."""
+def gallery_references(folder: str | Path, detector: str,
+                       max_features: int) -> tuple[list[logo.Reference], dict[str, str]]:
+    """Read and detect every reference of a gallery folder (see :func:`gallery_files`).
+
+    Returns
+    -------
+    references : list of Reference
+        One per image file, blank ones included (they have no keypoints: :func:`cvpipe.logo.build_gallery` leaves
+        them out).
+    blank : dict
+        Reference name -> ``"blank (one grey level, v)"`` for each image of one grey level.
+    """
     from .. import io, logo
     from ..features import detect
-    from ..logo.gallery import check_gallery_memory, features_nbytes
+    from ..logo.gallery import blank_reason, check_gallery_memory, features_nbytes
 
-    refs, held = [], 0
+    refs, blank, held = [], {}, 0
     for brand, f in progress(gallery_files(folder), "gallery"):
         gray = io.read_image(f, "gray")
         refs.append(logo.Reference(brand, str(f), detect(gray, detector, max_features),
                                     (gray.shape[1], gray.shape[0])))
+        if (why := blank_reason(gray)) is not None:
+            blank[str(f)] = why
         held += features_nbytes(refs[-1].features)
         check_gallery_memory(held, len(refs))  # refused while reading, before the whole folder is in memory
-    return refs
+    return refs, blank
+
+
+def note_unused(refs: list[logo.Reference], gallery: logo.Gallery, blank: dict[str, str], min_features: int) -> None:
+    """One note per brand of ``refs`` that ``gallery`` does not use, naming each of its images and why; one per
+    unused image of a brand still used.
+
+    Parameters
+    ----------
+    refs : list of Reference
+        What :func:`gallery_references` read.
+    gallery : Gallery
+        The gallery built from them (``gallery.dropped``: the names of the references left out).
+    blank : dict
+        :func:`gallery_references`'s reasons of the blank images.
+    min_features : int
+        The keypoints a reference needs.
+    """
+    left_out = set(gallery.dropped)
+    why: dict[str, list[tuple[str, str]]] = {}
+    for r in refs:
+        if r.name in left_out:
+            reason = blank.get(r.name) or (f"{len(r.features)} keypoints with {gallery.detector}, fewer than the "
+                                           f"{min_features} needed")
+            why.setdefault(r.brand, []).append((r.name, reason))
+    for brand, items in sorted(why.items()):
+        if brand in gallery.brands:
+            for name, reason in items:
+                note(f"note: gallery image {name} of brand {brand!r} is not used: {reason}")
+        else:
+            note(f"note: gallery brand {brand!r} is not used: " + "; ".join(f"{n}: {r}" for n, r in items))
 
 
 def recognize_scene(item: tuple, shared: tuple) -> tuple[dict, list, list]:
@@ -144,8 +195,9 @@ def run(args: argparse.Namespace) -> int:
                               [(f"SCENE {k + 1}", path) for k, path in enumerate(args.scenes)])
     with step(f"gallery ({args.method})"):
         # indexed before any scene runs, so that a gallery error is one line of its own
-        g = logo.build_gallery(gallery_references(args.gallery, args.method, args.max_features), mp.min_features,
-                               mp.reference_features)
+        refs, blank = gallery_references(args.gallery, args.method, args.max_features)
+        g = logo.build_gallery(refs, mp.min_features, mp.reference_features)
+    note_unused(refs, g, blank, mp.min_features)
     records, failed = [], 0
     shared = (g, args.method, args.max_features, args.min_long_side, mp, vp, args.seed)
     scenes = read_images(args.scenes, "gray", named=True)

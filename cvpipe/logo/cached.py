@@ -8,9 +8,10 @@ from pathlib import Path
 
 from .. import io
 from ..datasets import LogoInputs
+from ..errors import CvpipeError
 from ..features import NPZ_ARRAYS, Features
 from ..params import LogoMatchParams
-from .gallery import Gallery, Reference, build_gallery
+from .gallery import Gallery, Reference, blank_reason, build_gallery
 
 
 def feature_reasons(features: Path) -> dict[str, str]:
@@ -49,12 +50,14 @@ def load_gallery(inputs: LogoInputs, root: Path, features: Path, params: LogoMat
         Every reference file mapped to its brand (the brands in sorted order, a brand's files in the order
         ``find_logo`` lists them).
     dropped : list of dict
-        ``{"item", "reason"}`` for each reference left out (no features, too few keypoints).
+        ``{"item", "reason"}`` for each reference left out (no features, blank, too few keypoints); the last entry
+        of a brand left with no usable reference adds ``"; brand '<brand>' is not used"``.
     """
-    reasons, dropped, refs = feature_reasons(features), [], []
+    reasons, dropped, refs, brand_of = feature_reasons(features), [], [], {}
     for brand in sorted(inputs.gallery):
         for image in inputs.gallery[brand]:
             name = image.relative_to(root).as_posix()
+            brand_of[name] = brand
             got = features_of(features, root, image, reasons)
             if isinstance(got, str):
                 dropped.append({"item": name, "reason": got})
@@ -62,5 +65,23 @@ def load_gallery(inputs: LogoInputs, root: Path, features: Path, params: LogoMat
             w, h = (int(v) for v in got["image_size"])
             refs.append(Reference(brand, name, Features.from_arrays(got), (w, h)))
     gallery = build_gallery(refs, params.min_features, params.reference_features)
-    dropped += [{"item": n, "reason": f"fewer than {params.min_features} keypoints"} for n in gallery.dropped]
+    few = set(gallery.dropped)
+    dropped += [{"item": r.name, "reason": _too_few(root, r, params.min_features)} for r in refs if r.name in few]
+    for brand in sorted(set(inputs.gallery) - set(gallery.brands)):
+        mine = [d for d in dropped if brand_of.get(d["item"]) == brand]
+        if mine:
+            mine[-1]["reason"] += f"; brand {brand!r} is not used"
     return gallery, dropped
+
+
+def _too_few(root: Path, ref: Reference, min_features: int) -> str:
+    """Why ``ref`` (fewer than ``min_features`` keypoints) is left out: blank, when it has no keypoint and its image
+    (``root / ref.name``) holds one grey level; else the keypoint count."""
+    if len(ref.features) == 0:
+        try:
+            why = blank_reason(io.read_image(root / ref.name, "gray"))
+        except CvpipeError:
+            why = None  # the features stage read it; gone or changed since, the count still says why
+        if why:
+            return why
+    return f"fewer than {min_features} keypoints"

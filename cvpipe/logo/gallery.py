@@ -145,6 +145,13 @@ def check_gallery_memory(feature_bytes: int, references: int) -> None:
                  "`logo.features.max_features`)")
 
 
+def blank_reason(gray: np.ndarray) -> str | None:
+    """``"blank (one grey level, v)"`` when every pixel of the reference image ``gray`` is ``v`` (no detector finds a
+    keypoint in it), else None: why such a gallery image is not used."""
+    lo, hi = int(gray.min()), int(gray.max())
+    return f"blank (one grey level, {lo})" if lo == hi else None
+
+
 def _refuse_copies_across_brands(refs: Sequence[Reference]) -> None:
     """InputError naming both files when two brands hold the same picture (the same keypoints and descriptors).
 
