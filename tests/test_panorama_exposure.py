@@ -197,7 +197,7 @@ def test_81_megapixel_stitch_peaks_under_the_memory_budget(tmp_path):
     import subprocess
     import sys
 
-    # the sweep's 81 MP case (tests/test_sweep.py): a 9000 x 9000 texture stitched to itself
+    # the sweep's 81 MP case (tests/test_sweep.py): a 9000 x 9000 texture stitched to itself (under a second name)
     rng = np.random.default_rng(0)
     img = cv2.resize(rng.integers(0, 256, (300, 300), dtype=np.uint8), (9000, 9000), interpolation=cv2.INTER_LINEAR)
     for _ in range(40):
@@ -206,9 +206,11 @@ def test_81_megapixel_stitch_peaks_under_the_memory_budget(tmp_path):
     big = tmp_path / "big81.png"
     cv2.imwrite(str(big), img, [cv2.IMWRITE_PNG_COMPRESSION, 1])
     del img
+    twin = tmp_path / "big81_b.png"  # the same bytes under a second name: one path given twice is refused
+    os.link(big, twin)
     budget_gb = 4.0
     env = dict(os.environ, CVPIPE_MEMORY_BUDGET_GB=str(budget_gb))
-    proc = subprocess.run([sys.executable, "-c", _PEAK_RSS_LAUNCHER, "stitch", str(big), str(big), "-o",
+    proc = subprocess.run([sys.executable, "-c", _PEAK_RSS_LAUNCHER, "stitch", str(big), str(twin), "-o",
                            str(tmp_path / "pano.png")], capture_output=True, text=True, env=env, timeout=1800)
     assert proc.returncode == 0, proc.stderr[-500:]
     assert "memory budget" in proc.stderr  # composed at a reduced size, and said so

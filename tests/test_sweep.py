@@ -172,7 +172,7 @@ BIG_EXPECTED = {
     "inspect": (2, "differ by a factor"),  # the 320x240 reference and the 9000x9000 probe cannot be one part
     "homography": (1, "chance level"),  # the big texture is unrelated to view B
     "stereo": (2, "over the memory budget"),  # 9000 x 9000 x 16 disparities: names --max-disp
-    "stitch": (0, None),  # the same photo twice stitches to itself, composed at a reduced size (a note)
+    "stitch": (0, None),  # the same pixels under two names stitch to themselves, composed at a reduced size (a note)
 }
 #: address-space cap of each 81 MP run: the 4 GB budget plus the decoded images, OpenMP's and OpenCV's threads
 BIG_CAP_BYTES = 12 * 1024**3
@@ -199,7 +199,10 @@ def _cap():
 @pytest.mark.slow
 @pytest.mark.parametrize("command", COMMANDS)
 def test_sweep_81_megapixels(command, big_image, world, tmp_path):
-    bad = {"a": big_image, "b": big_image, "r": big_image}
+    # a second name for the same bytes (a hard link): stitch refuses one path given twice
+    twin = tmp_path / "big81_b.png"
+    os.link(big_image, twin)
+    bad = {"a": big_image, "b": twin, "r": big_image}
     out = tmp_path / "out"
     argv, product = argv_for(command, bad, world, out)
     env = dict(os.environ, CVPIPE_MEMORY_BUDGET_GB="4")
