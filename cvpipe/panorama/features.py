@@ -99,9 +99,20 @@ def _workers() -> int:
 
 
 def detect_all(grays: Sequence[np.ndarray], detector: str, max_features: int) -> list[Features]:
-    """:func:`cvpipe.features.detect` on every image (in threads: OpenCV releases the GIL)."""
-    with ThreadPoolExecutor(_workers()) as pool:
-        return list(pool.map(lambda g: detect(g, detector, max_features), grays))
+    """:func:`cvpipe.features.detect` on every image, one image per thread (OpenCV releases the GIL).
+
+    OpenCV runs each detection on its own threads as well; inside a pool that already has one image per core those
+    threads only compete with each other (on 2 cores, 1.83 -> 1.31 s wall for six SIFT detections, the same
+    features), so OpenCV is set to one thread for the pool's duration (``cv2.setNumThreads`` is process-wide: the
+    previous count is restored afterwards).
+    """
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        with ThreadPoolExecutor(_workers()) as pool:
+            return list(pool.map(lambda g: detect(g, detector, max_features), grays))
+    finally:
+        cv2.setNumThreads(threads)
 
 
 def features_of(images: Sequence[np.ndarray], params: PanoramaFeaturesParams | None = None,
