@@ -32,7 +32,8 @@ from .features import (detect_all, features_of, normalize_det, rescale_homograph
                        resized_size, scale_for, working_images)
 from .match import (Edge, MatchGraph, candidate_pairs, match_graph, match_graph_with, match_set, prefilter_counts,
                     refit)
-from .opencv_baseline import OPENCV_STATUS, opencv_stitch, opencv_stitch_with
+from .opencv_baseline import (OPENCV_STATUS, OpenCVStitch, camera_homographies, opencv_stitch, opencv_stitch_cameras,
+                              opencv_stitch_with)
 from .refine import levenberg_marquardt, nearest_rotation, refine_homographies, refine_rotations
 from .register import (REFINEMENTS, Registration, estimate_focal, maximum_spanning_tree, register, register_set,
                        register_with)
@@ -40,11 +41,11 @@ from .seams import seam_labels, seam_lines
 from .warp import PROJECTIONS, ComposeInputs, Warped, compose_inputs, warp_images, warp_set
 
 __all__ = ["BLENDERS", "DEFAULT_GAIN", "DEFAULT_GAIN_BLOCK", "GAIN_CHOICES", "apply_gains", "compensation_gains",
-           "OPENCV_STATUS", "PROJECTIONS", "REFINEMENTS", "ComposeInputs", "Edge", "MatchGraph", "Panorama",
-           "Registration", "Warped", "blend_feather", "blend_multiband", "blend_set", "candidate_pairs",
+           "OPENCV_STATUS", "OpenCVStitch", "PROJECTIONS", "REFINEMENTS", "ComposeInputs", "Edge", "MatchGraph", "Panorama",
+           "Registration", "Warped", "blend_feather", "blend_multiband", "blend_set", "camera_homographies", "candidate_pairs",
            "compose", "compose_inputs", "detect_all", "estimate_focal", "features_of", "gain_compensation",
            "largest_rectangle", "levenberg_marquardt", "match_graph", "match_graph_with", "match_set",
-           "maximum_spanning_tree", "nearest_rotation", "normalize_det", "opencv_stitch", "opencv_stitch_with",
+           "maximum_spanning_tree", "nearest_rotation", "normalize_det", "opencv_stitch", "opencv_stitch_cameras", "opencv_stitch_with",
            "overlap_difference", "prefilter_counts", "refine_homographies", "refine_rotations", "refit",
            "register", "register_set", "register_with", "rescale_homographies", "resize", "resize_matrix",
            "resized_size", "scale_for", "seam_labels", "seam_lines", "stitch", "warp_images", "warp_set",
