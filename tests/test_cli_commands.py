@@ -264,7 +264,26 @@ def test_stereo_png_output_is_the_picture(workdir, tmp_path, capsys):
     s = workdir / "data" / "samples" / "stereo" / "motorcycle"
     res = _run_json(["stereo", str(s / "left.png"), str(s / "right.png"), "--max-disp", "64", "--method",
                      "opencv-bm", "-o", str(tmp_path / "d.png"), "--json"], capsys)
-    assert res["out"] == str(tmp_path / "d.png") and cv2.imread(res["out"]) is not None
+    assert res["out"] == str(tmp_path / "d.png")
+    from cvpipe import stereo
+    from cvpipe.params import StereoBmParams
+    from cvpipe.stereo import depth
+
+    left, right = cv2.imread(str(s / "left.png")), cv2.imread(str(s / "right.png"))
+    disp = stereo.disparity_with(left, right, 64, StereoBmParams(), "opencv_bm")
+    png = cv2.imread(res["out"], cv2.IMREAD_UNCHANGED)
+    # PNG is lossless: the file holds exactly the library's disparity coloured over 0 .. max_disp, with its bar
+    np.testing.assert_array_equal(png, depth.colorize(disp, 0.0, 64.0, unit="px", label="disparity"))
+    # and its left part is that disparity in OpenCV's TURBO colours (255 / 64 levels per pixel), black where invalid
+    h, w = disp.shape
+    valid = np.isfinite(disp)
+    levels = np.zeros((h, w), np.uint8)
+    levels[valid] = np.clip(disp[valid] / 64.0 * 255.0, 0, 255).astype(np.uint8)
+    turbo = cv2.applyColorMap(levels, cv2.COLORMAP_TURBO)
+    turbo[~valid] = 0
+    # the colour bar panel is 70 px wide; most of the motorcycle pair has a disparity, so the picture is not blank
+    assert png.shape == (h, w + 70, 3) and valid.mean() > 0.5
+    np.testing.assert_array_equal(png[:, :w], turbo)
 
 
 def test_stitch_json_names_files(workdir, tmp_path, capsys):
@@ -320,12 +339,28 @@ def _parser(name):
     return sub.load(name)
 
 
+#: the flags of each command that take one of a fixed list of values (hough's `--refine` is an on/off switch); a
+#: command not listed has none of them
+ENUMERATED = {
+    "logo": {"--method"},
+    "hough": {"--method"},
+    "inspect": {"--detector"},
+    "homography": {"--method", "--detector"},
+    "stereo": {"--method"},
+    "stitch": {"--projection", "--blender", "--detector", "--refine"},
+}
+
+
 @pytest.mark.parametrize("name", COMMANDS)
 def test_enumerated_flags_list_their_choices(name):
-    for action in _parser(name)._actions:
-        if action.nargs != 0 and set(action.option_strings) & {"--method", "--detector", "--projection", "--blender",
-                                                                "--refine"}:
-            assert action.choices, f"cvpipe {name} {action.option_strings[0]} lists no choices"
+    assert set(ENUMERATED) <= set(COMMANDS)
+    known = set().union(*ENUMERATED.values())
+    flags = {a.option_strings[0]: a for a in _parser(name)._actions if a.nargs != 0 and set(a.option_strings) & known}
+    # each command has exactly its enumerated flags: one renamed or dropped (or added unlisted) fails here
+    assert set(flags) == ENUMERATED.get(name, set()), f"cvpipe {name}"
+    for flag, action in flags.items():
+        assert action.choices and all(isinstance(c, str) for c in action.choices), \
+            f"cvpipe {name} {flag} lists no choices"
 
 
 @pytest.mark.parametrize("argv", [["homography", "a", "b", "--method", "opencv-ransac"],

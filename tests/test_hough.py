@@ -486,9 +486,24 @@ def test_cli_json_matches_the_library(line_photo, capsys, impl):
 
 
 def test_cli_text_output_and_refine(line_photo, capsys):
-    path, _ = line_photo
-    assert cli.main(["hough", str(path), "--threshold", "60", "--refine", "--theta-deg", "0.5", "--rho", "0.5"]) == 0
-    assert "lines (ours)" in capsys.readouterr().out
+    path, img = line_photo
+    argv = ["hough", str(path), "--threshold", "60", "--refine", "--theta-deg", "0.5", "--rho", "0.5",
+            "--max-lines", "0"]
+    edges = cv2.Canny(img, 50, 150)  # the command's default edges (Canny 50 150), as in the test above
+    refined = hough.hough_lines(edges, 0.5, math.radians(0.5), 60, refine=True)
+    # refinement moves these lines off their bin centres: a command that ignored --refine would print others
+    assert not np.array_equal(refined, hough.hough_lines(edges, 0.5, math.radians(0.5), 60))
+    assert cli.main([*argv, "--json"]) == 0
+    np.testing.assert_array_equal(np.array(json.loads(capsys.readouterr().out)["lines"]), refined)
+    assert cli.main(argv) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == f"{len(refined)} lines (ours); rho [px], theta [deg], votes:"
+    printed = np.array([[float(v) for v in row.split()] for row in out[1:]])
+    # the text shows the same lines to its printed digits: half of 0.01 px for rho, half of 0.001 degrees for theta
+    # (plus the rounding to 6 decimals of the JSON's theta_deg before it is printed)
+    np.testing.assert_allclose(printed[:, 0], refined[:, 0], rtol=0, atol=0.005 + 1e-9)
+    np.testing.assert_allclose(printed[:, 1], np.degrees(refined[:, 1]), rtol=0, atol=0.0005 + 1e-6)
+    np.testing.assert_array_equal(printed[:, 2], refined[:, 2])
 
 
 @pytest.mark.parametrize("argv, message", [

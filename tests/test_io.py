@@ -162,10 +162,18 @@ def test_exif_orientation_is_applied_in_every_mode(tmp_path, suffix, fmt, orient
 
 
 def test_gray_and_bgr_conversion():
-    g = np.zeros((5, 6), np.uint8)
-    assert io.to_bgr(g).shape == (5, 6, 3)
-    assert io.to_gray(io.to_bgr(g)).shape == (5, 6)
-    assert io.to_gray(np.zeros((5, 6, 4), np.uint8)).shape == (5, 6)
+    # pure blue, green and red pixels and a mixed one: a swap of the B and R channels changes the grey of every pixel
+    # whose blue and red differ (BT.601 weights 0.114, 0.587, 0.299); the alphas vary, and never enter the grey
+    bgr = np.array([[[255, 0, 0], [0, 255, 0], [0, 0, 255], [30, 120, 210]]], np.uint8)
+    bgra = np.dstack([bgr, np.array([[0, 80, 160, 255]], np.uint8)])
+    np.testing.assert_array_equal(io.to_gray(bgr), cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY))
+    np.testing.assert_array_equal(io.to_gray(bgra), cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY))
+    assert io.to_gray(bgr).tolist() == [[29, 150, 76, 137]]  # round(0.114 B + 0.587 G + 0.299 R)
+    np.testing.assert_array_equal(io.to_bgr(bgra), bgr)
+    assert io.to_bgr(bgr) is bgr
+    g = np.array([[0, 7, 128, 255]], np.uint8)
+    np.testing.assert_array_equal(io.to_bgr(g), np.repeat(g[..., None], 3, axis=2))
+    assert io.to_gray(g) is g
     with pytest.raises(ValueError, match="`img` must be"):
         io.to_gray(np.zeros((5, 6, 2), np.uint8))
     with pytest.raises(ValueError, match="`img` must be"):
@@ -288,8 +296,11 @@ def test_save_image_roundtrip_and_bad_suffix(tmp_path, png):
     _, img = png
     io.save_image(tmp_path / "x.png", img)
     assert np.array_equal(io.read_image(tmp_path / "x.png"), img)
-    with pytest.raises(Exception):
-        io.save_image(tmp_path / "x.unknownformat", img)
+    bad = tmp_path / "x.unknownformat"
+    message = f"image output must end in one of {', '.join(io.IMAGE_WRITE_SUFFIXES)}, got {bad} (.unknownformat)"
+    with pytest.raises(InputError, match=re.escape(message)) as info:
+        io.save_image(bad, img)
+    assert info.value.file == str(bad)
     assert not (tmp_path / "x.unknownformat").exists()
 
 

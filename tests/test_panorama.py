@@ -178,6 +178,38 @@ def test_blending_is_seamless_on_constant_brightness(blender):
     assert np.abs(pano.astype(int) - 137).max() <= 1
 
 
+def _border_distance(x0: int, width: int, height: int, canvas=(320, 120)) -> np.ndarray:
+    """Distance of every canvas pixel to the border of a ``width`` x ``height`` box at column ``x0`` (0 outside):
+    one more than the pixels between it and the nearest edge, as a distance to the first pixel past the box."""
+    r = np.arange(canvas[1])[:, None]
+    c = np.arange(canvas[0])[None, :] - x0
+    d = np.minimum(np.minimum(c + 1, width - c), np.minimum(r + 1, height - r)).astype(np.float64)
+    return np.where((c >= 0) & (c < width), d, 0.0)
+
+
+def test_feather_is_the_distance_weighted_mean_and_gains_shrink_the_seam_step():
+    w = _two_constant(90, 150)
+    d0, d1 = _border_distance(0, 200, 120), _border_distance(120, 200, 120)
+    # the boxes are rectangles, so a chamfer distance (OpenCV's 3x3 L2 mask) is the straight-line count scaled by
+    # one constant: the weights' ratio, hence the mean, equals the one of these exact distances
+    panos = {}
+    for gain, g in (("none", np.ones(2)), ("gain", panorama.gain_compensation(w))):
+        panos[gain], _, _ = panorama.compose(w, "feather", 5, gain=gain)
+        expected = (d0 * 90 * g[0] + d1 * 150 * g[1]) / (d0 + d1)
+        # rounding to uint8 leaves at most half a grey level, plus float32 arithmetic (~1e-4 at 255)
+        err = np.abs(panos[gain].astype(np.float64) - expected[..., None]).max()
+        assert err <= 0.501, (gain, err)
+    plain, gained = panos["none"], panos["gain"]
+    # every overlap pixel is a different mix: column 150 of row 60 is 31 px into image 1 and 50 px from image 0's
+    # right edge, (50 * 90 + 31 * 150) / 81 = 112.96, not the plain average 120
+    assert plain[60, 150, 0] == 113
+    # the step between the pixels just outside the overlap (one image each) is 60 grey levels without the gains;
+    # with them it is |g1 * 150 - g0 * 90|, about 15 (sigma_n = 10 against sigma_g = 0.1 balance there): under a
+    # third of it
+    assert int(plain[60, 200, 0]) - int(plain[60, 119, 0]) == 60
+    assert abs(int(gained[60, 200, 0]) - int(gained[60, 119, 0])) < 20
+
+
 def test_gain_compensation_equalises_an_exposure_step():
     w = _two_constant(100, 130)
     gains = panorama.gain_compensation(w)
