@@ -153,6 +153,25 @@ def test_metrics_count_only_the_scenes_with_truth():
     assert [r["recall"] for r in logo.pr_rows(recs, "sift", 0.0)] == [0.5, 0.5]  # at scores 9 then 4
 
 
+def test_pick_method_chooses_the_most_accurate_detector():
+    # scene c has no gallery logo (truth None); accuracy counts a right brand or a right "none": sift 1/3, orb 3/3,
+    # brisk 2/3, so the best is neither the first detector nor the default
+    a, b_missed, b, c_wrong, c = (_record("a", "nike", 9.0, "nike"), _record("b", None, -np.inf, "puma"),
+                                  _record("b", "puma", 8.0, "puma"), _record("c", "nike", 5.0, None),
+                                  _record("c", None, -np.inf, None))
+    decisions = {"sift": [a, b_missed, c_wrong], "orb": [a, b, c], "brisk": [a, b, c_wrong]}
+    assert [logo.evaluate_records(r, 0.0)["accuracy"] for r in decisions.values()] == [1 / 3, 1.0, 2 / 3]
+    assert logo.pick_method(decisions, 0.0, "sift") == "orb"
+    # equal accuracy (2/3): more right brands wins (brisk 2 against 1), then the earlier detector
+    tie = {"sift": [a, b_missed, c], "brisk": [a, b, c_wrong]}
+    assert logo.pick_method(tie, 0.0, "sift") == "brisk"
+    assert logo.pick_method({"akaze": decisions["brisk"], "brisk": decisions["brisk"]}, 0.0, "brisk") == "akaze"
+    # without ground truth: the default when it ran, else the first detector
+    blind = [_record("a", "nike", 9.0)]
+    assert logo.pick_method({"orb": blind, "sift": blind}, 0.0, "sift") == "sift"
+    assert logo.pick_method({"orb": blind, "brisk": blind}, 0.0, "sift") == "orb"
+
+
 def test_merge_dropped_lists_each_input_once_with_its_detectors():
     got = logo.merge_dropped({"sift": [{"item": "scenes/x.jpg", "reason": "unreadable"}],
                                "orb": [{"item": "scenes/x.jpg", "reason": "unreadable"},

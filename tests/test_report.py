@@ -166,6 +166,14 @@ def test_format_cell(value, text):
     assert report.format_cell(value) == text
 
 
+# three significant digits below a second, two decimals above; each unit's range starts where the previous ends
+@pytest.mark.parametrize("seconds, text", [(0.0123, "12.3 ms"), (0.001, "1 ms"), (0.25, "250 ms"),
+                                           (0.9994, "999 ms"), (2.5e-4, "250 \u00b5s"), (0.0, "0 \u00b5s"),
+                                           (1.0, "1.00 s"), (2.5, "2.50 s"), (61.237, "61.24 s")])
+def test_format_seconds(seconds, text):
+    assert report.format_seconds(seconds) == text
+
+
 def test_timing_rows_come_from_the_runner_timing_files_sorted_by_stage():
     files = [{"stage": "stereo_disparity@sgm", "seconds": {"total": 2.0, "pair": 1.5}},
              {"stage": "hough_lines@ours", "seconds": {"total": 0.5, "bad": float("nan")}}]
