@@ -9,7 +9,7 @@ BIN := $(CURDIR)/$(VENV)/bin
 # editable install builds without isolation, so that importing cvpipe can rebuild an edited .pyx with them
 BUILD_REQUIRES := 'meson-python>=0.16' 'meson>=1.4' 'ninja>=1.11' 'cython>=3.0.10'
 
-.PHONY: run test test-all test-slow guard bench clean-venv
+.PHONY: run test test-all test-slow guard bench benchmarks clean-venv
 
 run: $(VENV)/.installed
 	PATH="$(BIN):$$PATH" $(BIN)/dvc repro
@@ -29,6 +29,15 @@ guard: $(VENV)/.installed
 
 bench: $(VENV)/.installed
 	PATH="$(BIN):$$PATH" $(BIN)/cvpipe bench pipeline
+
+# every benchmark on $$CVPIPE_DATA into benchmarks/<name>.json, one process each, stamped with the code it measured
+# (python -m cvpipe.bench.record --list names them), then BENCHMARKS.md, its plots and the README's headline column
+benchmarks: $(VENV)/.installed
+	@test -n "$$CVPIPE_DATA" || { echo "make benchmarks: set CVPIPE_DATA to the shared data root" >&2; exit 2; }
+	PATH="$(BIN):$$PATH" $(BIN)/dvc repro samples
+	export PATH="$(BIN):$$PATH"; for b in $$($(BIN)/python -m cvpipe.bench.record --list); do \
+	  $(BIN)/python -m cvpipe.bench.record $$b --dir benchmarks || exit 1; done
+	PATH="$(BIN):$$PATH" $(BIN)/cvpipe bench report --dir benchmarks --out BENCHMARKS.md --machine auto --readme README.md
 
 $(VENV)/.installed: pyproject.toml meson.build
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)

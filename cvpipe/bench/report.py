@@ -1,11 +1,14 @@
 """``cvpipe bench report``: render BENCHMARKS.md from the benchmarks' JSON result files.
 
-Each benchmark writes its result as JSON (``--out FILE`` or ``--json > FILE``) into one folder, one ``<name>.json``
-per benchmark (``benchmarks/`` by default). This command renders one section per benchmark of :data:`REPORTED`:
-the result as tables, the command that reproduces it, the machine (cpu count and model) and the load average it
-ran on. A benchmark whose JSON is absent gets one line saying so. Any other ``*.json`` in the folder is rendered
-too, after the known ones. Tables are cut (with a line saying how many rows were left out) so that the whole file
-stays within ``--max-lines``.
+``make benchmarks`` writes each benchmark's result as JSON into one folder, one ``<name>.json`` per benchmark
+(``benchmarks/`` by default; :mod:`cvpipe.bench.record` runs it and stamps it with the code it measured). This
+command renders one section per benchmark of :data:`REPORTED`: the command that reproduces it, the machine (cpu
+count and model), the load average it ran on, the library versions, the table of ours against each peer and its
+plot (:mod:`cvpipe.bench.peers`; the plot is written as ``<dir>/<name>.svg``), then the result's figures as tables.
+A benchmark whose JSON is absent gets one line saying so. Any other ``*.json`` in the folder is rendered too, after
+the known ones. Tables are cut, with a line saying how many rows were left out, so that the whole file stays within
+``--max-lines``. With ``--readme FILE`` the last column of FILE's task table
+(between the :data:`README_START` and :data:`README_END` comments) is rewritten with each task's headline.
 
 The tables come from the JSON's shape, not from per-benchmark code, so a benchmark that gains a field shows it
 without a change here: scalars (and dicts of scalars, one level deep) of the top level and of ``summary`` become a
@@ -26,9 +29,6 @@ from ..errors import InputError
 
 HELP = "render BENCHMARKS.md from the benchmarks' JSON result files (benchmarks/<name>.json)"
 EXAMPLE = "cvpipe bench report --dir benchmarks --out BENCHMARKS.md"
-
-DATA = "../shared/data"
-
 
 @dataclass(frozen=True)
 class Reported:
@@ -60,15 +60,15 @@ class Reported:
 REPORTED: dict[str, Reported] = {
     "guard": Reported(
         "the speed guard: each from-scratch part against OpenCV in one process, against the committed limits",
-        f"cvpipe bench guard --samples data/samples --data {DATA} --out benchmarks/guard.json",
+        "python -m cvpipe.bench.record guard",
         columns={"rows": ("row", "value", "unit", "limit", "over", "items", "what", "accuracy")}),
     "hough": Reported(
         "our Hough transform vs cv2.HoughLines on York Urban: parity, time ratio, recall of the true segments",
-        f"cvpipe bench hough --data {DATA} --json > benchmarks/hough.json",
+        "python -m cvpipe.bench.record hough",
         skip=("per_image",)),
     "homography": Reported(
         "our homography estimator vs OpenCV RANSAC / MAGSAC: Oxford + CMP pairs and a synthetic outlier sweep",
-        f"cvpipe bench homography --data {DATA} --out benchmarks/homography.json",
+        "python -m cvpipe.bench.record homography",
         skip=("real",),
         columns={"synthetic": ("outliers", "methods.ours.median_corner_error_px",
                                "methods.opencv_ransac.median_corner_error_px",
@@ -76,34 +76,34 @@ REPORTED: dict[str, Reported] = {
                                "ratio_ours_magsac_cpu")}),
     "defect": Reported(
         "defect inspection on DeepPCB pairs warped by random homographies: ours vs a plain difference",
-        f"cvpipe bench defect --data {DATA} --out benchmarks/defect.json",
+        "python -m cvpipe.bench.record defect",
         skip=("records",)),
     "logo": Reported(
         "logo recognition on the FlickrLogos-27 subset: precision, recall, accuracy, time per scene",
-        f"cvpipe bench logo --data {DATA} --json > benchmarks/logo.json"),
+        "python -m cvpipe.bench.record logo"),
     "logo_loo": Reported(
         "logo recognition, leave-one-photo-out over the boxed training photos",
-        f"cvpipe bench logo --data {DATA} --protocol loo --json > benchmarks/logo_loo.json"),
+        "python -m cvpipe.bench.record logo_loo"),
     "stereo": Reported(
         "our semi-global matching vs OpenCV BM / SGBM on Middlebury + motorcycle",
-        f"cvpipe bench stereo --data {DATA} --json > benchmarks/stereo.json",
+        "python -m cvpipe.bench.record stereo",
         columns={"rows": ("pair", "method", "bad_1.0", "bad_2.0", "mean_error", "density", "seconds",
                           "time_ratio_to_sgbm", "cpu_ratio_to_sgbm")}),
     "stereo_rectify": Reported(
         "uncalibrated rectification on unrectified Middlebury draws: ours vs OpenCV's, vertical error",
-        f"cvpipe bench stereo --data {DATA} --rectify --seeds 12 --json > benchmarks/stereo_rectify.json",
+        "python -m cvpipe.bench.record stereo_rectify",
         columns={"rows": ("pair", "seed", "vertical_median_px_ours", "vertical_median_px_opencv",
                           "vertical_p95_px_ours", "vertical_p95_px_opencv", "bad_2.0_rectified", "seconds_ours",
                           "seconds_opencv")}),
     "panorama": Reported(
         "our stitcher vs cv2.Stitcher on the Adobe and OpenStitching sets",
-        f"cvpipe bench panorama --data {DATA} --json > benchmarks/panorama.json",
+        "python -m cvpipe.bench.record panorama",
         columns={"sets": ("set", "images", "ours_ok", "opencv_status", "corner_error_median",
                           "direct_error_median", "ours_seconds", "opencv_seconds", "time_ratio", "command_ratio",
                           "command_cpu_ratio")}),
     "scale": Reported(
         "defect inspection fanned out over Dask: serial vs a LocalCluster vs an external cluster",
-        f"cvpipe bench scale --data {DATA} --out benchmarks/scale.json",
+        "python -m cvpipe.bench.record scale",
         columns={"rows": ("mode", "probes", "probes_per_s", "speedup_vs_serial", "speedup_vs_local1",
                           "empty_task_median_ms", "peak_rss_mb", "identical_results", "errors")}),
     "pipeline": Reported(
@@ -112,7 +112,8 @@ REPORTED: dict[str, Reported] = {
 }
 
 #: keys that describe the run rather than the result: shown in the machine line, not in the tables
-MACHINE_KEYS = ("cpus", "cpu_count", "cpu_model", "load_average", "load_average_1min", "command", "versions")
+MACHINE_KEYS = ("cpus", "cpu_count", "cpu_model", "load_average", "load_average_1min", "command", "versions", "stamp",
+                "wall_seconds")
 #: a record's label column: the first of these fields it has
 LABELS = ("row", "set", "pair", "mode", "method", "image", "name")
 
@@ -123,6 +124,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--machine", help="the cpu model, for results whose JSON does not record one "
                                           "(`auto`: this machine's, from /proc/cpuinfo)")
     parser.add_argument("--max-lines", type=int, default=300, help="line budget of the whole file (default 300)")
+    parser.add_argument("--readme", help="also rewrite the headline column of this README's task table "
+                                         "(between its benchmark comments)")
 
 
 # ----------------------------------------------------------------------------------------------- formatting
@@ -247,7 +250,14 @@ def _machine(data: Any, machine: str | None) -> str:
     versions = find("versions")
     if isinstance(versions, dict) and versions:
         where += "; " + ", ".join(f"{k} {v}" for k, v in sorted(versions.items()))
-    return f"Machine: {', '.join(parts)}; {where}."
+    text = f"Machine: {', '.join(parts)}; {where}."
+    wall, stamp = find("wall_seconds"), find("stamp")
+    if wall is not None:
+        text += f" Wall time {fmt(wall)} s."
+    if isinstance(stamp, dict) and stamp.get("digest"):
+        text += (f" Code: cvpipe {stamp.get('cvpipe')}, sources sha256 {str(stamp['digest'])[:12]} "
+                 f"({len(stamp.get('files', {}))} files).")
+    return text
 
 
 def cpu_model(cpuinfo: str = "/proc/cpuinfo") -> str | None:
@@ -265,8 +275,11 @@ def cpu_model(cpuinfo: str = "/proc/cpuinfo") -> str | None:
 
 HEADER = ["# Benchmarks", "",
           "This file is generated by `cvpipe bench report` from the JSON results in `{dir}/`: do not edit it by",
-          "hand. Each section is the current result of one benchmark, the command that wrote its JSON, and the",
-          "machine and load it ran on. Rejected variants and their figures are in `docs/notes/`.", ""]
+          "hand. `make benchmarks` runs every benchmark on `$CVPIPE_DATA` and regenerates it (with the plots in",
+          "`{dir}/` and the README's headline column). Each section is the current result of one benchmark: the",
+          "command that gives its JSON, the machine, load and library versions it ran on, the code it measured (a",
+          "digest of the cvpipe sources the run imported: a test fails when the code has changed since), ours",
+          "against each peer, then all its figures. Rejected variants and their figures are in `docs/notes/`.", ""]
 
 
 def render(results: dict[str, Any], machine: str | None = None, max_lines: int = 300,
@@ -308,12 +321,92 @@ def _render_all(results: dict[str, Any], names: list[str], machine: str | None, 
         if spec:
             lines += [spec.title[0].upper() + spec.title[1:] + ".", ""]
         lines += [f"    {command}", "", _machine(data, machine), ""]
+        lines += _peer_lines(name, data, folder, 10 ** 9 if cap is None else cap)
         lines += render_result(data, spec, 10 ** 9 if cap is None else cap, f"{folder}/{name}.json") + [""]
     if absent:
         lines += ["## Not measured", ""] + absent + [""]
     while lines and lines[-1] == "":
         lines.pop()
     return lines
+
+
+def _peer_lines(name: str, data: Any, folder: str, max_rows: int) -> list[str]:
+    """The table of ours against each peer and the link to the plot, for a benchmark of :data:`peers.SECTIONS`."""
+    from . import peers
+
+    if name not in peers.SECTIONS or not isinstance(data, dict):
+        return []
+    table, plot = peers.SECTIONS[name]
+    header, rows = table(data)
+    lines = ["**ours against each peer**", ""] + _table(header, rows, max_rows, f"{folder}/{name}.json") + [""]
+    if plot is not None and plot(data) is not None:
+        lines += [f"![{name}]({folder}/{name}.svg)", ""]
+    return lines
+
+
+def render_plots(results: dict[str, Any]) -> dict[str, str]:
+    """Benchmark name -> the SVG text of its plot, for each result that has one."""
+    from . import peers
+
+    out = {}
+    for name, data in results.items():
+        plot = peers.SECTIONS.get(name, (None, None))[1]
+        svg = plot(data) if plot is not None and isinstance(data, dict) else None
+        if svg is not None:
+            out[name] = svg
+    return out
+
+
+#: the comments around the README's task table; the generator rewrites the table's last column between them
+README_START = "<!-- task table: the last column is generated by `cvpipe bench report --readme` from benchmarks/*.json -->"
+README_END = "<!-- end of the task table -->"
+#: the header of the generated column
+README_COLUMN = "measured: ours vs the best peer ([BENCHMARKS.md](BENCHMARKS.md))"
+
+
+def _cells(row: str) -> list[str]:
+    import re
+
+    return [c.strip() for c in re.split(r"(?<!\\)\|", row.strip())[1:-1]]
+
+
+def rewrite_readme(text: str, results: dict[str, Any]) -> str:
+    """``text`` with the headline column of its task table (between the markers) regenerated from ``results``.
+
+    The table's other columns are kept as they are; a table without the column gets it appended. A row whose
+    first cell is not a task of :data:`peers.HEADLINES` is kept unchanged.
+
+    Raises
+    ------
+    InputError
+        The markers are missing or hold no table.
+    """
+    from . import peers
+
+    lines = text.split("\n")
+    try:
+        start = lines.index(README_START)
+        end = lines.index(README_END, start)
+    except ValueError:
+        raise InputError(f"--readme: no task table between `{README_START}` and `{README_END}`") from None
+    rows = [i for i in range(start + 1, end) if lines[i].lstrip().startswith("|")]
+    if len(rows) < 2:
+        raise InputError("--readme: the task table between the markers has no rows")
+    header = _cells(lines[rows[0]])
+    has_column = header[-1] == README_COLUMN
+    width = len(header) if has_column else len(header) + 1
+    for k, i in enumerate(rows):
+        cells = _cells(lines[i])
+        if not has_column:
+            cells.append("")
+        if k == 0:
+            cells[-1] = README_COLUMN
+        elif k == 1:
+            cells = ["---"] * width
+        elif cells[0] in peers.HEADLINES:
+            cells[-1] = peers.headline(cells[0], results)
+        lines[i] = "| " + " | ".join(cells) + " |" if k != 1 else "|" + "---|" * width
+    return "\n".join(lines)
 
 
 def load_results(folder: str | os.PathLike) -> dict[str, Any]:
@@ -344,10 +437,20 @@ def run(args: argparse.Namespace) -> int:
     if args.max_lines < 20:
         raise InputError(f"`--max-lines` must be >= 20, got {args.max_lines}")
     machine = cpu_model() if args.machine == "auto" else args.machine
-    text = render(load_results(args.dir), machine, args.max_lines, Path(args.dir).as_posix())
+    results = load_results(args.dir)
+    readme = None
+    if args.readme:  # checked before anything is written
+        readme = rewrite_readme(io.read_text(args.readme, "--readme"), results)
+    text = render(results, machine, args.max_lines, Path(args.dir).as_posix())
     if args.out == "-":
         print(text, end="")
-        return 0
-    with io.atomic_path(io.check_output_path(args.out, "--out", (".md",))) as tmp:
-        tmp.write_text(text, encoding="utf-8")
+    else:
+        with io.atomic_path(io.check_output_path(args.out, "--out", (".md",))) as tmp:
+            tmp.write_text(text, encoding="utf-8")
+        for name, svg in render_plots(results).items():
+            with io.atomic_path(Path(args.dir) / f"{name}.svg") as tmp:
+                tmp.write_text(svg, encoding="utf-8")
+    if readme is not None:
+        with io.atomic_path(args.readme) as tmp:
+            tmp.write_text(readme, encoding="utf-8")
     return 0
