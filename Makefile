@@ -6,8 +6,10 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(CURDIR)/$(VENV)/bin
 # the build backend and the compiler of the kernels (pyproject.toml's [build-system] requires, the same pins): the
-# editable install builds without isolation, so that importing cvpipe can rebuild an edited .pyx with them
-BUILD_REQUIRES := 'meson-python>=0.16' 'meson>=1.4' 'ninja>=1.11' 'cython>=3.0.10'
+# editable install builds without isolation, so that importing cvpipe can rebuild an edited .pyx with them. Without
+# isolation the dependencies that come as source (antlr4-python3-runtime, under dvc) build with the venv's own
+# setuptools as well, and a venv's bundled one is too old to make wheels by itself (70.1 has bdist_wheel built in).
+BUILD_REQUIRES := 'meson-python>=0.16' 'meson>=1.4' 'ninja>=1.11' 'cython>=3.0.10' 'setuptools>=70.1'
 
 .PHONY: run test test-all test-slow guard bench benchmarks clean-venv
 

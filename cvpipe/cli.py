@@ -39,6 +39,8 @@ COMMANDS = {
     "stitch": "stitch",
     "panorama": "stitch",  # the task's name (params.yaml, dvc.yaml, outputs): an alias of `stitch`
     "bench": "bench",
+    "init": "init",
+    "stage": "stage",
 }
 
 EXAMPLE = "cvpipe hough data/samples/hough/synthetic_grid.png --threshold 100 --max-lines 10"

@@ -248,8 +248,7 @@ def not_processed_table(dropped: Sequence[Mapping[str, Any]]) -> list[dict]:
 #: the figures that a task's tracked metrics file keeps: its ``all`` rows, the few numbers that ``dvc exp show`` and
 #: ``dvc metrics diff`` compare across experiments (everything per item goes to the stage's details file)
 HEADLINE = {
-    "hough": ("images", "lines_ours", "lines_opencv", "identical_images", "parity_mean", "recall_ours",
-              "recall_opencv"),
+    "hough": ("lines_ours", "lines_opencv", "parity_mean", "recall_ours", "recall_opencv"),
     "homography": ("median_corner_error_px", "success_rate", "median_inliers"),
     "defect": ("faulty", "perfect", "f1", "false_alarms"),
     "logo": ("precision", "recall", "answered"),

@@ -303,13 +303,53 @@ def path_param(path: str | os.PathLike, key: str) -> str:
     return node
 
 
+#: what a path of DVC's temporary copy for a queued experiment (``dvc exp run --queue``, ``--temp``) contains
+EXPERIMENT_COPY = f"{os.sep}.dvc{os.sep}tmp{os.sep}exps{os.sep}"
+
+
+def check_data_folder(folder: str, key: str, cwd: str | os.PathLike | None = None) -> None:
+    """Refuse a data folder ``folder`` (the parameter ``key``) that does not exist, in one line; in DVC's copy of
+    the repository for a queued experiment, say why it is missing and how to make experiments see it.
+
+    A queued experiment runs in a copy made from git and DVC's cache: a folder that neither tracks is not in it.
+    """
+    if Path(folder).is_dir():
+        return
+    here = os.path.abspath(cwd or os.getcwd())
+    if EXPERIMENT_COPY in here + os.sep:
+        raise InputError(f"`{key}`: {folder} is not in this experiment's copy of the repository (a queued "
+                         f"experiment sees only what git or DVC tracks): run `dvc add {folder}` and commit "
+                         f"{folder}.dvc (or commit the folder to git), or queue with `--copy-paths {folder}`",
+                         file=folder)
+    raise InputError(f"`{key}`: no such folder: {folder}", file=folder)
+
+
 def _resolve_path_params(ns: argparse.Namespace, args: dict[str, str]) -> None:
-    """Replace each ``--<name>-param KEY`` given by ``--<name> <value of KEY>`` (see :func:`path_param`)."""
+    """Replace each ``--<name>-param KEY`` given by ``--<name> <value of KEY>`` (see :func:`path_param`), and
+    check that a data folder given so exists (:func:`check_data_folder`)."""
     for name in args:
         dest = name.replace("-", "_")
         key = getattr(ns, f"{dest}{PARAM_SUFFIX.replace('-', '_')}", None)
         if key is not None:
-            setattr(ns, dest, path_param(ns.params, key))
+            value = path_param(ns.params, key)
+            check_data_folder(value, key)
+            setattr(ns, dest, value)
+
+
+def check_version(params_path: str | os.PathLike, installed: str | None = None) -> None:
+    """Refuse to run when the params file records another cvpipe version (``cvpipe.version``, written by ``cvpipe
+    init``) than the one installed: a stage's cached results would otherwise mix two versions' output. Without the
+    key (this repository, where stages depend on the source files instead), nothing to check."""
+    from cvpipe import __version__
+    from cvpipe.params import read_params_file
+
+    installed = installed or __version__
+    section = read_params_file(params_path).get("cvpipe")
+    recorded = section.get("version") if isinstance(section, dict) else None
+    if recorded is not None and str(recorded) != installed:
+        raise InputError(f"{params_path}: `cvpipe.version` is {recorded} but cvpipe {installed} is installed: "
+                         f"install cvpipe=={recorded}, or run `cvpipe init --upgrade .` to record {installed} "
+                         "(every stage then reruns once)", file=str(params_path))
 
 
 def _has_compute(path: str) -> bool:
@@ -379,6 +419,7 @@ def run(fn: Callable[[Stage], Any], *, section: str | Sequence[str] | None = Non
     t0 = time.perf_counter()
     try:
         interrupt.check()
+        check_version(ns.params)
         _resolve_path_params(ns, args)
         names = [section] if isinstance(section, str) else list(section or [])
         for sec in names:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from cvpipe import datasets, defect, io
 from cvpipe.errors import EstimationError
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def defect_diff(st: Stage) -> None:

@@ -6,7 +6,7 @@ from pathlib import Path
 from cvpipe import datasets, io, matching
 from cvpipe.errors import InputError
 from cvpipe.features import Features
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def defect_match(st: Stage) -> None:

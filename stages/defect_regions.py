@@ -9,7 +9,7 @@ a probe dropped by an earlier stage has ``verdict: null`` and its reason in ``er
 from pathlib import Path
 
 from cvpipe import defect, io
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def defect_regions(st: Stage) -> None:

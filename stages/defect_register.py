@@ -13,7 +13,7 @@ from pathlib import Path
 from cvpipe import datasets, defect, io
 from cvpipe.errors import CvpipeError, EstimationError
 from cvpipe.features import Features
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def defect_register(st: Stage) -> None:

@@ -7,7 +7,7 @@ from pathlib import Path
 from cvpipe import datasets, io
 from cvpipe.defect import report as rep
 from cvpipe.errors import InputError
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 #: tiles per row of the two montages
 COLS = 5

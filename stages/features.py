@@ -10,7 +10,7 @@ from pathlib import Path
 from cvpipe import features, io
 from cvpipe.errors import InputError
 from cvpipe.params import SECTIONS, FeaturesParams, load_section
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def images_under(root: Path) -> list[Path]:

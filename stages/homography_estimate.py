@@ -7,7 +7,7 @@ from pathlib import Path
 from cvpipe import io
 from cvpipe.errors import InputError
 from cvpipe.homography import METHODS, estimate_item
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def homography_estimate(st: Stage) -> None:

@@ -7,7 +7,7 @@ from pathlib import Path
 from cvpipe import datasets, io, matching
 from cvpipe.errors import CvpipeError
 from cvpipe.features import NPZ_ARRAYS, Features
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def homography_match(st: Stage) -> None:

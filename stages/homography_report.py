@@ -5,7 +5,7 @@ quality plots."""
 from pathlib import Path
 
 from cvpipe import datasets, homography, io
-from stages._runner import REPORT_ARGS, Stage, run
+from ._runner import REPORT_ARGS, Stage, run
 
 
 def homography_report(st: Stage) -> None:

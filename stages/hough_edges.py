@@ -5,7 +5,7 @@ from pathlib import Path
 
 from cvpipe import datasets, hough, io
 from cvpipe.errors import InputError
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def hough_edges(st: Stage) -> None:

@@ -4,7 +4,7 @@ uncached timings)."""
 from pathlib import Path
 
 from cvpipe import hough, io
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def hough_lines(st: Stage) -> None:

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from cvpipe import datasets, hough, io
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 #: strongest lines drawn per overlay (all of them still count in the metrics)
 MAX_DRAWN = 60

@@ -12,7 +12,7 @@ from cvpipe import datasets, io, logo
 from cvpipe.errors import CvpipeError, InputError
 from cvpipe.features import DETECTORS, Features
 from cvpipe.logo.cached import feature_reasons, features_of, load_gallery
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def logo_match(st: Stage) -> None:

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from cvpipe import datasets, io, logo
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 #: overlays of found logos drawn (plus up to MAX_WRONG wrong answers on scenes with ground truth)
 MAX_FOUND = 6

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from cvpipe import io, panorama
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def panorama_blend(st: Stage) -> None:

@@ -5,7 +5,7 @@ from pathlib import Path
 
 from cvpipe import io, panorama
 from cvpipe.errors import EstimationError
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def _crop(st: Stage, src: Path, name: str, out: Path) -> dict:

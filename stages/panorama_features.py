@@ -8,7 +8,7 @@ import numpy as np
 
 from cvpipe import datasets, io, panorama
 from cvpipe.errors import InputError
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 #: smallest side of an image the pipeline accepts (as `cvpipe.panorama.stitch`)
 MIN_SIDE = 16

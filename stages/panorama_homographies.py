@@ -5,7 +5,7 @@ recorded there with its reason)."""
 from pathlib import Path
 
 from cvpipe import io, panorama
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def panorama_homographies(st: Stage) -> None:

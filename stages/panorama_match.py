@@ -5,7 +5,7 @@ from pathlib import Path
 
 from cvpipe import io, panorama
 from cvpipe.features import Features
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def panorama_match(st: Stage) -> None:

@@ -5,7 +5,7 @@ from pathlib import Path
 
 from cvpipe import datasets, io, panorama
 from cvpipe.errors import InputError
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def panorama_opencv_stitcher(st: Stage) -> None:

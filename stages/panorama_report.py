@@ -5,7 +5,7 @@ from pathlib import Path
 
 from cvpipe import datasets, io
 from cvpipe.panorama import report as pr
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 #: height in pixels of the report's side-by-side pictures
 PICTURE_HEIGHT = 300

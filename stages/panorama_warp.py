@@ -4,7 +4,7 @@
 from pathlib import Path
 
 from cvpipe import io, panorama
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def panorama_warp(st: Stage) -> None:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from cvpipe import io, report
 from cvpipe.errors import InputError
-from stages._runner import TIMINGS_DIR, Stage, run
+from ._runner import TIMINGS_DIR, Stage, run
 
 
 def load_summaries(outputs: Path, root: Path) -> tuple[list[dict], dict[str, tuple[int, int]]]:

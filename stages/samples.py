@@ -8,7 +8,7 @@ import shutil
 from pathlib import Path
 
 from cvpipe import io, samples
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def build_samples(st: Stage) -> None:

@@ -11,7 +11,7 @@ import numpy as np
 from cvpipe import io, stereo
 from cvpipe.stereo import depth
 from cvpipe.errors import InputError
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def stereo_depth(st: Stage) -> None:

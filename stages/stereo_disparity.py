@@ -13,7 +13,7 @@ import numpy as np
 from cvpipe import datasets, io, stereo
 from cvpipe.errors import InputError
 from cvpipe.params import SECTIONS, load_section
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def stereo_disparity(st: Stage) -> None:

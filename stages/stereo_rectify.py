@@ -9,7 +9,7 @@ from pathlib import Path
 
 from cvpipe import datasets, io, stereo
 from cvpipe.errors import InputError
-from stages._runner import Stage, run
+from ._runner import Stage, run
 
 
 def stereo_rectify(st: Stage) -> None:

@@ -6,7 +6,7 @@ the quality plots (bad-2.0 where there is truth, the valid fraction for every pa
 from pathlib import Path
 
 from cvpipe import datasets, io, stereo
-from stages._runner import REPORT_ARGS, Stage, run
+from ._runner import REPORT_ARGS, Stage, run
 
 
 def stereo_report(st: Stage) -> None:

@@ -104,11 +104,44 @@ def missing_deps(dvc_yaml: Path = ROOT / "dvc.yaml") -> dict[str, list[str]]:
     return result
 
 
+def code_unit(path: Path) -> str:
+    """The dvc.yaml dependency that covers the repository file ``path``: its task package (or any other package of
+    cvpipe: ``cvpipe/hough/transform.py`` -> ``cvpipe/hough``), or the file itself for a top-level module of cvpipe
+    and for a stage script or the runner (``cvpipe/io.py``, ``stages/_runner.py``)."""
+    parts = path.relative_to(ROOT).parts
+    if parts[0] == "cvpipe" and len(parts) > 2:
+        return "/".join(parts[:2])
+    return "/".join(parts)
+
+
+def code_deps(module: str) -> list[str]:
+    """The code dependencies of the stage that runs ``module``: the units (:func:`code_unit`) of everything it
+    imports, sorted."""
+    return sorted({code_unit(f) for f in closure(module)})
+
+
+def _flow(items: list[str], indent: int, width: int = 118) -> list[str]:
+    """``deps: [a, b, ...]`` as YAML lines of at most ``width`` columns (a value with ``$``, ``{`` or ``,`` quoted)."""
+    words = [f'"{i}"' if any(c in i for c in "${},[]#") else i for i in items]
+    lines, line = [], " " * indent + "deps: ["
+    for k, w in enumerate(words):
+        piece = w + ("]" if k == len(words) - 1 else ",")
+        if len(line) + 1 + len(piece) > width and not line.endswith("["):
+            lines.append(line + "\n")
+            line = " " * (indent + 7) + piece
+        else:
+            line += ("" if line.endswith("[") else " ") + piece
+    lines.append(line + "\n")
+    return lines
+
+
 def fix_deps(dvc_yaml: Path = ROOT / "dvc.yaml") -> int:
-    """Rewrite each stage's code deps in ``dvc_yaml`` to exactly the files it imports (other deps and comments kept).
+    """Rewrite each stage's deps in ``dvc_yaml`` as one flow list: its other deps (data, earlier outputs) as they
+    were, then its code deps (:func:`code_deps`); comments and everything else kept.
 
     Returns the number of stages whose deps changed."""
     modules = stage_modules(dvc_yaml)
+    stages = yaml.safe_load(dvc_yaml.read_text(encoding="utf-8"))["stages"]
     lines = dvc_yaml.read_text(encoding="utf-8").splitlines(keepends=True)
     out, stage, changed, i = [], None, 0, 0
     while i < len(lines):
@@ -116,18 +149,22 @@ def fix_deps(dvc_yaml: Path = ROOT / "dvc.yaml") -> int:
         m = re.match(r"^  (\w+):\s*$", line)
         if m:
             stage = m.group(1)
-        if stage in modules and line.strip() == "deps:":
-            out.append(line)
-            i += 1
-            block = []
-            while i < len(lines) and lines[i].startswith("      - "):
-                block.append(lines[i])
+        if stage in modules and line.strip().startswith("deps:"):
+            start = i
+            if line.strip() == "deps:":  # block style: the `- ` lines that follow
                 i += 1
-            keep = [b for b in block if not b.strip()[2:].startswith(("cvpipe/", "stages/"))]
-            code = [f"      - {f.relative_to(ROOT).as_posix()}\n" for f in sorted(closure(modules[stage]))]
-            if keep + code != block:
+                while i < len(lines) and lines[i].startswith("      - "):
+                    i += 1
+            else:  # flow style: up to the closing bracket
+                while not lines[i].rstrip().endswith("]"):
+                    i += 1
+                i += 1
+            old = [str(d) for d in stages[stage].get("deps", [])]
+            keep = [d for d in old if not d.startswith(("cvpipe/", "stages/"))]
+            new = _flow(keep + code_deps(modules[stage]), indent=4)
+            if new != lines[start:i]:
                 changed += 1
-            out.extend(keep + code)
+            out.extend(new)
             continue
         out.append(line)
         i += 1
