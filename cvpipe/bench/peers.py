@@ -178,10 +178,10 @@ def stereo_plot(data: dict) -> str | None:
     if not pairs:
         return None
     series = {}
-    for m in ("sgm", "opencv_sgbm", "opencv_bm"):
+    for m, label in (("sgm", "ours (SGM)"), ("opencv_sgbm", "cv2 SGBM"), ("opencv_bm", "cv2 StereoBM")):
         by = {r["pair"]: r.get("bad_2.0") for r in rows if r["method"] == m}
         if by:
-            series[STEREO_NAMES[m].split(",")[0]] = [None if by.get(p) is None else 100 * by[p] for p in pairs]
+            series[label] = [None if by.get(p) is None else 100 * by[p] for p in pairs]
     return plots.bar_chart(pairs, series, "bad-2.0 per pair (lower is better)", "bad-2.0 (%)")
 
 
@@ -193,9 +193,9 @@ def stereo_headline(data: dict, rectify: dict | None = None) -> str | None:
         return None
     better = sum(sgm[p]["bad_2.0"] <= sgbm[p]["bad_2.0"] for p in sgm if p in sgbm)
     t = sum(r["seconds"] for r in sgm.values()) / sum(r["seconds"] for r in sgbm.values())
-    text = (f"Middlebury + motorcycle, {len(sgm)} pairs: mean bad-2.0 {pct(_mean([r['bad_2.0'] for r in sgm.values()]))} "
-            f"(best-mode SGBM {pct(_mean([r['bad_2.0'] for r in sgbm.values()]))}), lower or equal on {better}/"
-            f"{len(sgm)}, {ratio(t)} its time")
+    ours, peer = (pct(_mean([r["bad_2.0"] for r in d.values()])) for d in (sgm, sgbm))
+    text = (f"Middlebury + motorcycle, {len(sgm)} pairs: mean bad-2.0 {ours} (best-mode SGBM {peer}), lower or "
+            f"equal on {better}/{len(sgm)}, {ratio(t)} its time")
     if rectify:
         v = _get(rectify, "summary/mean_vertical_median_px")
         if isinstance(v, dict) and v.get("ours") is not None:
@@ -267,9 +267,9 @@ def logo_plot(data: dict) -> str | None:
     for m, ev in _logo_methods(data).items():
         curve = ev.get("curve")
         if isinstance(curve, list) and curve:
-            pts = sorted((c["recall"], c["precision"]) for c in curve
-                         if c.get("recall") is not None and c.get("precision") is not None)
-            series[m] = pts
+            # in the order of the swept threshold, high to low: recall grows along the curve
+            ordered = sorted(curve, key=lambda c: -(c.get("threshold") or 0.0))
+            series[m] = [(c.get("recall"), c.get("precision")) for c in ordered]
     if not series:
         return None
     return plots.xy_chart(series, "Precision against recall (score threshold swept)", "recall", "precision",
