@@ -28,28 +28,32 @@ from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomog
 from .blend import (BLENDERS, DEFAULT_GAIN, DEFAULT_GAIN_BLOCK, GAIN_CHOICES, apply_gains, blend_feather,
                     blend_multiband, blend_set, compensation_gains, compose, gain_compensation, overlap_difference)
 from .crop import largest_rectangle
-from .features import (detect_all, features_of, normalize_det, rescale_homographies, resize, resize_matrix,
-                       resized_size, scale_for, working_images)
+from .features import (detect_all, features_and_images_of, features_of, normalize_det, rescale_homographies, resize,
+                       resize_matrix, resized_size, scale_for, working_images)
 from .match import (Edge, MatchGraph, candidate_pairs, match_graph, match_graph_with, match_set, prefilter_counts,
                     refit)
 from .opencv_baseline import (OPENCV_STATUS, OpenCVStitch, camera_homographies, opencv_stitch, opencv_stitch_cameras,
                               opencv_stitch_with)
+from .presets import DEFAULT_PRESET, PRESET_CHOICES, PRESETS, preset_sections
 from .refine import levenberg_marquardt, nearest_rotation, refine_homographies, refine_rotations
 from .register import (REFINEMENTS, Registration, estimate_focal, maximum_spanning_tree, register, register_set,
                        register_with)
 from .seams import seam_labels, seam_lines
+from .track import DEFAULT_PAIR_REFINE, PAIR_REFINE_CHOICES, corners, track_pair
 from .warp import PROJECTIONS, ComposeInputs, Warped, compose_inputs, warp_images, warp_set
 
 __all__ = ["BLENDERS", "DEFAULT_GAIN", "DEFAULT_GAIN_BLOCK", "GAIN_CHOICES", "apply_gains", "compensation_gains",
-           "OPENCV_STATUS", "OpenCVStitch", "PROJECTIONS", "REFINEMENTS", "ComposeInputs", "Edge", "MatchGraph", "Panorama",
-           "Registration", "Warped", "blend_feather", "blend_multiband", "blend_set", "camera_homographies", "candidate_pairs",
-           "compose", "compose_inputs", "detect_all", "estimate_focal", "features_of", "gain_compensation",
-           "largest_rectangle", "levenberg_marquardt", "match_graph", "match_graph_with", "match_set",
-           "maximum_spanning_tree", "nearest_rotation", "normalize_det", "opencv_stitch", "opencv_stitch_cameras", "opencv_stitch_with",
-           "overlap_difference", "prefilter_counts", "refine_homographies", "refine_rotations", "refit",
-           "register", "register_set", "register_with", "rescale_homographies", "resize", "resize_matrix",
-           "resized_size", "scale_for", "seam_labels", "seam_lines", "stitch", "warp_images", "warp_set",
-           "working_images"]
+           "OPENCV_STATUS", "OpenCVStitch", "PROJECTIONS", "REFINEMENTS", "ComposeInputs", "Edge", "MatchGraph",
+           "Panorama", "Registration", "Warped", "blend_feather", "blend_multiband", "blend_set",
+           "camera_homographies", "candidate_pairs", "compose", "compose_inputs", "detect_all", "estimate_focal",
+           "features_and_images_of", "features_of", "gain_compensation", "largest_rectangle", "levenberg_marquardt",
+           "match_graph", "match_graph_with", "match_set", "maximum_spanning_tree", "nearest_rotation",
+           "normalize_det", "opencv_stitch", "opencv_stitch_cameras", "opencv_stitch_with", "overlap_difference",
+           "prefilter_counts", "refine_homographies", "refine_rotations", "refit", "register", "register_set",
+           "register_with", "rescale_homographies", "resize", "resize_matrix", "resized_size", "scale_for",
+           "seam_labels", "seam_lines", "stitch", "warp_images", "warp_set", "working_images", "DEFAULT_PRESET",
+           "PRESET_CHOICES", "PRESETS", "preset_sections", "DEFAULT_PAIR_REFINE", "PAIR_REFINE_CHOICES", "corners",
+           "track_pair"]
 
 
 @dataclass(frozen=True)
@@ -146,10 +150,11 @@ def stitch(images: Sequence[np.ndarray], features: PanoramaFeaturesParams = Pano
     rng = np.random.default_rng(rng)
     t = {}
     t0 = time.perf_counter()
-    work_sizes, feats = features_of(images, features)
+    work_sizes, feats, grays = features_and_images_of(images, features)
     t["features"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    graph = match_graph_with(feats, work_sizes, matching, rng)
+    graph = match_graph_with(feats, work_sizes, matching, rng, grays)
+    del grays
     t["match"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     reg = register_with(graph, homographies, rng, ids=ids)

@@ -144,6 +144,14 @@ def features_of(images: Sequence[np.ndarray], params: PanoramaFeaturesParams | N
     >>> [len(f.xy) <= 300 for f in feats]
     [True, True]
     """
+    sizes, feats, _ = features_and_images_of(images, params)
+    return sizes, feats
+
+
+def features_and_images_of(images: Sequence[np.ndarray], params: PanoramaFeaturesParams | None = None,
+                           ) -> tuple[list[tuple[int, int]], list[Features], list[np.ndarray]]:
+    """:func:`features_of`, and the grayscale images at the registration resolution that the features were found
+    on (which the match step tracks in when ``panorama.match.pair_refine`` asks for it)."""
     p = section_or_default(params, PanoramaFeaturesParams, "panorama.features")
     grays, sizes = working_images(images, p.work_megapix)
-    return sizes, detect_all(grays, p.detector, p.max_features)
+    return sizes, detect_all(grays, p.detector, p.max_features), grays

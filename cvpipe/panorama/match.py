@@ -20,6 +20,7 @@ from ..homography import find_homography
 from ..matching import MatchIndex, nearest_two, ratio_matches
 from ..params import PanoramaMatchParams, section_or_default
 from .features import _workers
+from .track import DEFAULT_PAIR_REFINE, PAIR_REFINE_CHOICES, corners, track_pair
 
 
 @dataclass(frozen=True)
@@ -214,7 +215,8 @@ def refit(src: np.ndarray, dst: np.ndarray, H: np.ndarray, inliers: np.ndarray, 
 
 def match_graph(feats: Sequence[Features], sizes: Sequence[tuple[int, int]], *, ratio: float,
                 ransac_threshold: float, min_inliers: int, min_confidence: float, candidates: int = 0,
-                refit_threshold: float = 0.0, rng=None) -> MatchGraph:
+                refit_threshold: float = 0.0, pair_refine: str = DEFAULT_PAIR_REFINE,
+                images: Sequence[np.ndarray] | None = None, rng=None) -> MatchGraph:
     """Match every pair of images and keep the pairs that share a plausible homography.
 
     Parameters
@@ -236,6 +238,12 @@ def match_graph(feats: Sequence[Features], sizes: Sequence[tuple[int, int]], *, 
     refit_threshold : float
         When in (0, ``ransac_threshold``), an accepted pair's homography is fitted again to its inliers with this
         tighter threshold (:func:`refit`); acceptance is still decided by the first fit. 0: no refit.
+    pair_refine : str
+        One of :data:`~cvpipe.panorama.track.PAIR_REFINE_CHOICES`: ``"lk"`` fits an accepted pair's homography
+        again to Lucas-Kanade tracks of image i's corners in the overlap (:func:`~cvpipe.panorama.track.track_pair`,
+        instead of the refit; the refit when too few points track); it needs ``images``.
+    images : sequence of (H, W) uint8, optional
+        The grayscale images at the registration resolution (for ``pair_refine``).
     rng : seed or Generator
         For RANSAC.
 
@@ -243,11 +251,17 @@ def match_graph(feats: Sequence[Features], sizes: Sequence[tuple[int, int]], *, 
     -------
     MatchGraph
     """
+    if pair_refine not in PAIR_REFINE_CHOICES:
+        raise ValueError(f"`pair_refine` must be one of {list(PAIR_REFINE_CHOICES)}, got {pair_refine!r}")
+    if pair_refine != "none" and (images is None or len(images) != len(feats)):
+        raise ValueError(f"`pair_refine` {pair_refine!r} needs the images at the registration resolution, one per "
+                         "features")
     rng = np.random.default_rng(rng)
     n = len(feats)
     M = np.zeros((n, n), np.int64)
     I = np.zeros((n, n), np.int64)
     C = np.zeros((n, n), np.float64)
+    points: dict[int, np.ndarray] = {}  # each image's corners, found when a pair first tracks them
     todo, skipped = candidate_pairs(feats, ratio, candidates)
     rejected = {ij: f"not a candidate pair ({c} prefilter matches)" for ij, c in skipped.items()}
     edges = {}
@@ -279,6 +293,14 @@ def match_graph(feats: Sequence[Features], sizes: Sequence[tuple[int, int]], *, 
             rejected[(i, j)] = why
             return
         H, keep = fit.H, fit.inliers
+        if pair_refine == "lk":
+            if i not in points:
+                points[i] = corners(images[i])
+            tracked = track_pair(images[i], images[j], H, points[i], min_inliers, rng=rng)
+            if tracked is not None and not _plausible(tracked[0], sizes[i]):
+                H, a, b = tracked
+                edges[(i, j)] = Edge(i, j, H / H[2, 2], a, b, conf)
+                return
         if 0 < refit_threshold < ransac_threshold:
             H, keep = refit(src, dst, fit.H, fit.inliers, refit_threshold, min_inliers, sizes[i], rng)
         edges[(i, j)] = Edge(i, j, H / H[2, 2], src[keep], dst[keep], conf)
@@ -332,7 +354,8 @@ def _components(n: int, edges) -> list[list[int]]:
 
 
 def match_graph_with(feats: Sequence[Features], sizes: Sequence[tuple[int, int]],
-                     params: PanoramaMatchParams | None, rng) -> MatchGraph:
+                     params: PanoramaMatchParams | None, rng, images: Sequence[np.ndarray] | None = None
+                     ) -> MatchGraph:
     """:func:`match_graph` with the ``panorama.match`` section (``ratio``, ``ransac_threshold``, ``min_inliers``,
     ``min_confidence``, ``candidates``, ``refit_threshold``): the step of :func:`cvpipe.panorama.stitch` and of the
     ``panorama_match`` stage.
@@ -347,6 +370,8 @@ def match_graph_with(feats: Sequence[Features], sizes: Sequence[tuple[int, int]]
         The ``panorama.match`` section (None: its defaults).
     rng : seed or Generator
         For RANSAC (the stage passes the section's ``seed``; ``stitch`` its own generator).
+    images : sequence of (H, W) uint8, optional
+        The grayscale images at the registration resolution, which ``pair_refine: lk`` tracks in.
 
     Returns
     -------
@@ -366,7 +391,7 @@ def match_graph_with(feats: Sequence[Features], sizes: Sequence[tuple[int, int]]
     p = section_or_default(params, PanoramaMatchParams, "panorama.match")
     return match_graph(feats, sizes, ratio=p.ratio, ransac_threshold=p.ransac_threshold, min_inliers=p.min_inliers,
                        min_confidence=p.min_confidence, candidates=p.candidates, refit_threshold=p.refit_threshold,
-                       rng=rng)
+                       pair_refine=p.pair_refine, images=images, rng=rng)
 
 
 def match_set(item: tuple, p) -> tuple[MatchGraph, float]:

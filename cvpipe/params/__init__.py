@@ -235,7 +235,8 @@ class PanoramaFeaturesParams(FeaturesParams):
 class PanoramaMatchParams(Section):
     """``panorama.match``: pairwise matching and the acceptance of a pair as an edge of the match graph; only each
     image's ``candidates`` most promising partners are matched in full (0: every pair). An accepted pair's
-    homography is refitted on its inliers with the tighter ``refit_threshold`` (0: no refit)."""
+    homography is refitted on its inliers with the tighter ``refit_threshold`` (0: no refit), or, with
+    ``pair_refine: lk``, fitted to Lucas-Kanade tracks of its inliers (:mod:`cvpipe.panorama.track`)."""
 
     ratio: Ratio = 0.8
     ransac_threshold: RansacThreshold = 3.0
@@ -243,6 +244,7 @@ class PanoramaMatchParams(Section):
     min_confidence: float = Field(1.0, ge=0.0)
     candidates: int = Field(5, ge=0)
     refit_threshold: Annotated[float, Bound("<=", "ransac_threshold")] = Field(2.0, ge=0.0)
+    pair_refine: Literal["none", "lk"] = "none"
     seed: Seed = 0
 
 
@@ -293,6 +295,9 @@ class LogoMatchParams(Section):
     min_features: int = Field(8, ge=4, le=100_000)
     reference_features: Annotated[int, Bound(">=", "min_features")] = Field(1000, le=1_000_000)
 
+
+#: the logo methods of :data:`cvpipe.logo.METHODS`: one detector, or ``fused`` (several under one decision)
+LogoMethod = Literal["sift", "orb", "brisk", "akaze", "fused"]
 
 #: the geometric fitters of :data:`cvpipe.logo.MODELS`
 LogoModel = Literal["affine_homography", "homography"]
