@@ -30,6 +30,7 @@ import typing
 from pathlib import Path
 
 from ..errors import EstimationError, InputError
+from ..commands.stitch import PRESET_CHOICES
 from ..params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams, PanoramaMatchParams,
                       PanoramaWarpParams, replace)
 
@@ -78,6 +79,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--refit-threshold", type=float, default=PanoramaMatchParams().refit_threshold,
                         help="refit each accepted pair on its inliers with this threshold in px, 0 = off "
                              "(default from params)")
+    parser.add_argument("--presets", nargs="+", choices=PRESET_CHOICES, default=list(PRESET_CHOICES),
+                        help="our presets to time and measure beside cv2.Stitcher (default all); the first one is "
+                             "the one the detailed columns describe")
     parser.add_argument("--out", help="folder for the panoramas (ours and OpenCV's) and results.json")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
 
@@ -146,6 +150,23 @@ def _accuracy(pano: panorama.Panorama, gt: dict, sizes: list) -> dict:
             "direct_share_within_2px": float(np.mean(np.array(direct) <= 2.0)) if direct else None,
             "corner_error_median": med(corner), "corner_error_max": max(corner) if corner else None,
             "corner_error_adjacent_median": med(adjacent), "overlap_error_median": med(overlap)}
+
+
+def pair_error_median(G: dict, gt: dict, sizes: list) -> float | None:
+    """Median corner error over the ground-truth pairs i -> j of the pair homographies ``inv(G[j]) @ G[i]``
+    composed from per-image homographies ``G`` (ours: ``Panorama.homographies``; cv2.Stitcher's: those its cameras
+    imply, :func:`cvpipe.panorama.camera_homographies`), in full-resolution pixels. A pair with an image that the
+    stitcher left out counts as a failure (infinite error), for both alike; None without ground truth or when the
+    median is a failure."""
+    import numpy as np
+    from ..metrics import corner_error
+
+    if not gt:
+        return None
+    errs = [corner_error(np.linalg.inv(G[j]) @ G[i], H, *sizes[i]) if i in G and j in G else float("inf")
+            for (i, j), H in gt.items()]
+    m = float(np.median(errs))
+    return m if np.isfinite(m) else None
 
 
 def _gt_floor(gt: dict, sizes: list) -> float | None:
@@ -305,12 +326,16 @@ def run(args: argparse.Namespace) -> int:
     if args.repeat < 1:
         raise ValueError(f"`--repeat` must be at least 1, got {args.repeat}")
     root = Path(args.data)
+    presets = list(dict.fromkeys(args.presets))
     feats = replace(PanoramaFeaturesParams(), detector=args.detector)
     match = replace(PanoramaMatchParams(), refit_threshold=args.refit_threshold)
     warp = replace(PanoramaWarpParams(), projection=args.projection)
     homs = replace(PanoramaHomographiesParams(), refine=args.refine)
-    cfg = {"features": feats, "matching": match, "homographies": homs, "warp": warp,
-           "blend": PanoramaBlendParams()}
+    # the command-line settings are the default preset's; another preset sets its own fields on top of them
+    cfgs = {k: panorama.preset_sections(k, features=feats, matching=match, homographies=homs, warp=warp,
+                                        blend=PanoramaBlendParams()) for k in presets}
+    cfg = cfgs[presets[0]]
+    feats = cfg["features"]
     results, first_call = [], None
     for name in args.sets:
         folder, files, must_drop = SETS[name]
@@ -323,27 +348,54 @@ def run(args: argparse.Namespace) -> int:
         ours, err = _run_ours(images, cfg)  # warm-up run, also the result reported
         if first_call is None:  # the first stitch of this process: OpenCV's initialisation, first allocations
             first_call = {"set": name, "seconds": time.perf_counter() - t}
-        cv = panorama.opencv_stitch(images, feats.work_megapix, warp.compose_megapix, match.min_confidence)
+        others = {k: _run_ours(images, cfgs[k])[0] for k in presets[1:]}  # warm-up runs, also reported
+
+        def cv_run():
+            return panorama.opencv_stitch_cameras(images, feats.work_megapix, warp.compose_megapix,
+                                                  match.min_confidence, seed=0)
+
+        cv_full = cv_run()
+        cv = (cv_full.status, cv_full.pano, cv_full.used)
         t_ours, t_cv, t_cmd, cpu_cv, cpu_cmd = [], [], [], [], []
+        t_presets = {k: [] for k in presets[1:]}
         with tempfile.TemporaryDirectory() as tmp:
             _run_command(paths, args.projection, Path(tmp) / "pano.png")  # warm-up: files in the OS page cache
-            for _ in range(args.repeat):  # interleaved, so all three see the same machine load
+            for _ in range(args.repeat):  # interleaved, so all of them see the same machine load
                 t = time.perf_counter()
                 _run_ours(images, cfg)
                 t_ours.append(time.perf_counter() - t)
+                for k in t_presets:
+                    t = time.perf_counter()
+                    _run_ours(images, cfgs[k])
+                    t_presets[k].append(time.perf_counter() - t)
                 cpu, t = time.process_time(), time.perf_counter()
-                panorama.opencv_stitch(images, feats.work_megapix, warp.compose_megapix, match.min_confidence)
+                cv_run()
                 t_cv.append(time.perf_counter() - t)
                 cpu_cv.append(time.process_time() - cpu)
                 wall, cpu = _run_command(paths, args.projection, Path(tmp) / "pano.png")
                 t_cmd.append(wall)
                 cpu_cmd.append(cpu)
+        gt = _gt_pairs(root / folder, files) if folder.startswith("adobe") else {}
         row = {"set": name, "images": len(files), "ours_ok": ours is not None, "ours_error": err,
                "opencv_status": cv[0], "opencv_used": [files[k] for k in cv[2]],
                "ours_seconds": statistics.median(t_ours), "opencv_seconds": statistics.median(t_cv),
                "command_seconds": statistics.median(t_cmd), "opencv_cpu_seconds": statistics.median(cpu_cv),
                "command_cpu_seconds": statistics.median(cpu_cmd)}
         row["time_ratio"] = row["ours_seconds"] / row["opencv_seconds"]
+        if gt:
+            row["opencv_pair_error_median"] = pair_error_median(cv_full.homographies, gt, sizes)
+        row["presets"] = {presets[0]: {"seconds": row["ours_seconds"], "time_ratio": row["time_ratio"],
+                                       "used": None if ours is None else len(ours.registration.used)}}
+        for k, pano_k in others.items():
+            sec = statistics.median(t_presets[k])
+            row["presets"][k] = {"seconds": sec, "time_ratio": sec / row["opencv_seconds"],
+                                 "used": None if pano_k is None else len(pano_k.registration.used)}
+        if gt:
+            for k, pano_k in {presets[0]: ours, **others}.items():
+                if pano_k is not None:
+                    acc = _accuracy(pano_k, gt, sizes)
+                    row["presets"][k].update(direct_error_median=acc["direct_error_median"],
+                                             pair_error_median=pair_error_median(pano_k.homographies, gt, sizes))
         row["command_ratio"] = row["command_seconds"] / row["opencv_seconds"]
         row["command_cpu_ratio"] = row["command_cpu_seconds"] / row["opencv_cpu_seconds"]
         if ours is not None:
@@ -359,8 +411,7 @@ def run(args: argparse.Namespace) -> int:
             row["ghosting"] = panorama.overlap_difference(w, panorama.gain_compensation(w))
             if name in EXPOSURE_SETS:
                 row["exposure"] = _compare_exposure(w, name, args.out)
-            if folder.startswith("adobe"):
-                gt = _gt_pairs(root / folder, files)
+            if gt:
                 row.update(_accuracy(ours, gt, sizes), gt_self_consistency=_gt_consistency(gt, sizes),
                            gt_consistent_floor=_gt_floor(gt, sizes))
             if args.out:
@@ -371,7 +422,7 @@ def run(args: argparse.Namespace) -> int:
     summary = {
         "sets": results, "first_call": first_call, "repeat": args.repeat,
         "projection": args.projection, "detector": args.detector, "refine": args.refine,
-        "refit_threshold": args.refit_threshold,
+        "refit_threshold": args.refit_threshold, "presets": presets,
         "work_megapix": feats.work_megapix, "compose_megapix": warp.compose_megapix,
         "all_stitched": all(r["ours_ok"] for r in results),
         "time_ratio_total": sum(r["ours_seconds"] for r in results) / sum(r["opencv_seconds"] for r in results),
@@ -410,6 +461,18 @@ def run(args: argparse.Namespace) -> int:
               f"{r['opencv_cpu_seconds']:7.2f} {r['command_cpu_ratio']:7.2f}")
         for f, why in r.get("dropped", {}).items():
             print(f"{'':15s} dropped {f}: {why}")
+    print("both axes: in-process time / cv2.Stitcher's, and the median corner error over the ground-truth pairs "
+          "of the homographies composed from each one's global model (ours) or cameras (cv2.Stitcher), px, an image "
+          "left out counting as a failure; in brackets our pairwise stage's own (direct) error")
+    head = "".join(f" {k + ' ratio':>14s} {k + ' px':>18s}" for k in presets)
+    print(f"{'set':15s}{head} {'cv2 s':>6s} {'cv2 px':>7s}")
+    for r in results:
+        cells = ""
+        for k in presets:
+            q = r["presets"][k]
+            px = f"{fmt(q.get('pair_error_median'), '.2f')} ({fmt(q.get('direct_error_median'), '.2f')})"
+            cells += f" {q['time_ratio']:14.2f} {px:>18s}"
+        print(f"{r['set']:15s}{cells} {r['opencv_seconds']:6.2f} {fmt(r.get('opencv_pair_error_median'), '.2f'):>7s}")
     print(f"total time ratio ours / cv2.Stitcher: {summary['time_ratio_total']:.2f}; the `cvpipe stitch` command "
           f"(subprocess, imports included) / cv2.Stitcher in this process: at most "
           f"{summary['command_ratio_max']:.2f} in wall time, {summary['command_cpu_ratio_max']:.2f} in CPU time; load average {' '.join(f'{v:.1f}' for v in summary['load_average'])}")
