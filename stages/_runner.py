@@ -339,11 +339,13 @@ def _resolve_path_params(ns: argparse.Namespace, args: dict[str, str]) -> None:
 def check_version(params_path: str | os.PathLike, installed: str | None = None) -> None:
     """Refuse to run when the params file records another cvpipe version (``cvpipe.version``, written by ``cvpipe
     init``) than the one installed: a stage's cached results would otherwise mix two versions' output. Without the
-    key (this repository, where stages depend on the source files instead), nothing to check."""
+    key (this repository, where stages depend on the source files instead) or the file, nothing to check."""
     from cvpipe import __version__
     from cvpipe.params import read_params_file
 
     installed = installed or __version__
+    if not Path(params_path).is_file():  # a stage that reads no parameters needs no params file
+        return
     section = read_params_file(params_path).get("cvpipe")
     recorded = section.get("version") if isinstance(section, dict) else None
     if recorded is not None and str(recorded) != installed:
