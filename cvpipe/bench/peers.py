@@ -138,7 +138,7 @@ def defect_headline(data: dict) -> str | None:
             f"defect-box F1 {num(ours.get('f1'), 2)}")
     if base:
         text += (f" (plain difference: {pct(base.get('accuracy'))}, F1 {num(base.get('f1'), 2)}); "
-                 f"{ratio(ours['median_s_per_probe'] / base['median_s_per_probe'])} its time"
+                 f"in {ratio(ours['median_s_per_probe'] / base['median_s_per_probe'])} its time"
                  if ours.get("median_s_per_probe") and base.get("median_s_per_probe") else "")
     return text
 
@@ -195,7 +195,7 @@ def stereo_headline(data: dict, rectify: dict | None = None) -> str | None:
     t = sum(r["seconds"] for r in sgm.values()) / sum(r["seconds"] for r in sgbm.values())
     ours, peer = (pct(_mean([r["bad_2.0"] for r in d.values()])) for d in (sgm, sgbm))
     text = (f"Middlebury + motorcycle, {len(sgm)} pairs: mean bad-2.0 {ours} (best-mode SGBM {peer}), lower or "
-            f"equal on {better}/{len(sgm)}, {ratio(t)} its time")
+            f"equal on {better}/{len(sgm)}, in {ratio(t)} its time")
     if rectify:
         v = _get(rectify, "summary/mean_vertical_median_px")
         if isinstance(v, dict) and v.get("ours") is not None:
@@ -299,8 +299,8 @@ def logo_headline(data: dict) -> str | None:
 
 # -------------------------------------------------------------------------------------------------- panorama
 
-#: keys of OpenCV's accuracy in a panorama set record, if the benchmark measures it
-OPENCV_ERROR_KEYS = ("opencv_corner_error_median", "opencv_direct_error_median")
+#: keys of cv2.Stitcher's accuracy in a panorama set record (the pair error of the homographies its cameras imply)
+OPENCV_ERROR_KEYS = ("opencv_pair_error_median", "opencv_corner_error_median")
 
 
 def _sets(data: dict) -> list[dict]:
@@ -308,32 +308,58 @@ def _sets(data: dict) -> list[dict]:
     return s if isinstance(s, list) else []
 
 
+def _presets(data: dict) -> list[str]:
+    """Our presets measured, the default (the one the detailed columns describe) first; ``[""]`` for a result
+    from before presets (one configuration, its figures at the set record's top level)."""
+    p = data.get("presets", _get(data, "summary/presets"))
+    return list(p) if isinstance(p, list) and p else [""]
+
+
+def _ours(r: dict, preset: str) -> dict:
+    """Seconds, time ratio and ground-truth pair error (None without ground truth) of our ``preset`` on set ``r``."""
+    q = _get(r, f"presets/{preset}") if preset else None
+    if isinstance(q, dict):
+        return {"seconds": q.get("seconds"), "time_ratio": q.get("time_ratio"), "used": q.get("used"),
+                "error": q.get("pair_error_median")}
+    used = r.get("used")
+    return {"seconds": r.get("ours_seconds"), "time_ratio": r.get("time_ratio"),
+            "used": len(used) if isinstance(used, list) else None, "error": r.get("corner_error_median")}
+
+
 def _opencv_error(r: dict) -> float | None:
     return next((r[k] for k in OPENCV_ERROR_KEYS if r.get(k) is not None), None)
 
 
+def _ours_name(preset: str) -> str:
+    return f"ours ({preset})" if preset else "ours"
+
+
 def panorama_table(data: dict) -> Table:
+    presets = _presets(data)
+    header = ["set", "images", "cv2.Stitcher status"]
+    for k in presets:
+        header += [f"{_ours_name(k)} error (px)", f"{_ours_name(k)} s", f"{_ours_name(k)} / OpenCV time"]
+    header += ["cv2.Stitcher error (px)", "cv2.Stitcher s"]
     rows = []
     for r in _sets(data):
-        used = r.get("used")
-        rows.append([r.get("set"), r.get("images"), len(used) if isinstance(used, list) else ("no" if not r.get(
-            "ours_ok") else "-"), r.get("opencv_status"), num(r.get("corner_error_median")), num(_opencv_error(r)),
-            num(r.get("ours_seconds")), num(r.get("opencv_seconds")), ratio(r.get("time_ratio")),
-            ratio(r.get("command_ratio"))])
-    return (["set", "images", "ours used", "cv2.Stitcher status", "ours corner error (px)",
-             "cv2.Stitcher corner error (px)", "ours s", "cv2.Stitcher s", "time / OpenCV",
-             "`cvpipe stitch` / OpenCV"], rows)
+        row = [r.get("set"), r.get("images"), r.get("opencv_status")]
+        for k in presets:
+            q = _ours(r, k)
+            row += [num(q["error"]), num(q["seconds"]), ratio(q["time_ratio"])]
+        rows.append(row + [num(_opencv_error(r)), num(r.get("opencv_seconds"))])
+    return header, rows
 
 
 def panorama_plot(data: dict) -> str | None:
-    sets = [r for r in _sets(data) if r.get("corner_error_median") is not None]
-    if not sets:
+    sets = _sets(data)
+    series = {_ours_name(k): [(_ours(r, k)["seconds"], _ours(r, k)["error"]) for r in sets
+                              if _ours(r, k)["error"] is not None] for k in _presets(data)}
+    series["cv2.Stitcher"] = [(r.get("opencv_seconds"), _opencv_error(r)) for r in sets
+                              if _opencv_error(r) is not None]
+    series = {k: v for k, v in series.items() if v}
+    if not series:
         return None
-    series = {"ours": [(r["ours_seconds"], r["corner_error_median"]) for r in sets]}
-    cv = [(r["opencv_seconds"], _opencv_error(r)) for r in sets if _opencv_error(r) is not None]
-    if cv:
-        series["cv2.Stitcher"] = cv
-    return plots.xy_chart(series, "Ground-truth sets: corner error against time", "seconds per panorama",
+    return plots.xy_chart(series, "Sets with ground truth: error against time", "seconds per panorama",
                           "median corner error (px)", lines=False)
 
 
@@ -341,18 +367,20 @@ def panorama_headline(data: dict) -> str | None:
     sets = _sets(data)
     if not sets:
         return None
-    gt = [r for r in sets if r.get("corner_error_median") is not None]
+    preset = _presets(data)[0]
+    ours = [_ours(r, preset) for r in sets]
     ok = sum(bool(r.get("ours_ok")) for r in sets)
-    cv_ok = sum(str(r.get("opencv_status", "")).upper() in ("OK", "0") for r in sets)
-    t = _get(data, "time_ratio_total") or _get(data, "summary/time_ratio_total")
+    cv_ok = sum(r.get("opencv_status") == "OK" for r in sets)
     text = f"Adobe + OpenStitching, {len(sets)} sets: ours stitched {ok}, `cv2.Stitcher` {cv_ok}"
+    gt = [(q["error"], _opencv_error(r)) for q, r in zip(ours, sets) if q["error"] is not None]
     if gt:
-        text += f"; median corner error {num(_mean([r['corner_error_median'] for r in gt]), 2)} px on the Adobe sets"
-        cv = [_opencv_error(r) for r in gt if _opencv_error(r) is not None]
+        text += f"; median corner error {num(_mean([e for e, _ in gt]), 2)} px over {len(gt)} sets with ground truth"
+        cv = [c for _, c in gt if c is not None]
         if cv:
             text += f" (OpenCV {num(_mean(cv), 2)} px)"
-    if t is not None:
-        text += f"; {ratio(t)} its time"
+    secs = [(q["seconds"], r.get("opencv_seconds")) for q, r in zip(ours, sets)]
+    if secs and all(a is not None and b for a, b in secs):
+        text += f"; in {ratio(sum(a for a, _ in secs) / sum(b for _, b in secs))} its time"
     return text
 
 

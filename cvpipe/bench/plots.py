@@ -59,12 +59,13 @@ def _legend(names: list[str]) -> list[str]:
     return out
 
 
-def _axes(xt: list[tuple[float, str]], yt: list[tuple[float, str]]) -> list[str]:
+def _axes(xt: list[tuple[float, str]], yt: list[tuple[float, str]], x_font: int = 11) -> list[str]:
     x0, x1, y0, y1 = LEFT, WIDTH - RIGHT, HEIGHT - BOTTOM, TOP
     out = [f'<path d="M{x0} {y1}V{y0}H{x1}" fill="none" stroke="#444"/>']
+    size = "" if x_font == 11 else f' font-size="{x_font}"'
     for px, text in xt:
         out.append(f'<path d="M{_num(px)} {y0}v4" stroke="#444"/>')
-        out.append(f'<text x="{_num(px)}" y="{y0 + 16}" text-anchor="middle">{escape(text)}</text>')
+        out.append(f'<text x="{_num(px)}" y="{y0 + 16}" text-anchor="middle"{size}>{escape(text)}</text>')
     for py, text in yt:
         out.append(f'<path d="M{x0 - 4} {_num(py)}H{x1}" stroke="#ddd"/>')
         out.append(f'<text x="{x0 - 7}" y="{_num(py + 4)}" text-anchor="end">{escape(text)}</text>')
@@ -130,8 +131,10 @@ def bar_chart(categories: list[str], series: dict[str, list[float | None]], titl
     bar = span * 0.8 / max(len(series), 1)
     py = (lambda y: HEIGHT - BOTTOM - y / yhi * (HEIGHT - BOTTOM - TOP))
     out = _frame(title, "", ylabel)
+    # category names in a smaller type when a group is narrow (about 5.5 px per character at size 9)
+    x_font = 11 if max((len(c) for c in categories), default=0) * 6.5 < span else 9
     out += _axes([(LEFT + span * (i + 0.5), c) for i, c in enumerate(categories)],
-                 [(py(v), _label(v)) for v in yt_vals])
+                 [(py(v), _label(v)) for v in yt_vals], x_font)
     for j, (name, vals) in enumerate(series.items()):
         colour = COLOURS[j % len(COLOURS)]
         for i, v in enumerate(vals):

@@ -4,9 +4,10 @@
 runs in this process exactly as ``cvpipe bench <task> <arguments> --json`` would (its JSON, printed on stdout, is
 captured); the file written is that JSON plus these top-level keys:
 
-- ``stamp``: cvpipe's version and the SHA-256 of every cvpipe source file the run measured (see
-  :func:`measured_files`), with a digest over all of them, so that :func:`stale_files` tells whether the
-  committed result is older than the code it measures;
+- ``stamp``: cvpipe's version and the SHA-256 of the code of every cvpipe source file the run measured (see
+  :func:`measured_files` and :func:`file_digest`: a Python file's docstrings, comments and layout do not count),
+  with a digest over all of them, so that :func:`stale_files` tells whether the committed result is older than
+  the code it measures;
 - ``command`` (the equivalent ``cvpipe bench`` command line), ``wall_seconds``, ``cpus``, ``cpu_model``,
   ``load_average_1min`` (before and after the run) and ``versions`` (Python and the libraries the run imported).
 
@@ -17,6 +18,7 @@ previous file in place.
 from __future__ import annotations
 
 import argparse
+import ast
 import contextlib
 import hashlib
 import importlib
@@ -125,8 +127,37 @@ def measured_files(modules: dict | None = None, root: Path = ROOT) -> list[str]:
     return sorted(rel)
 
 
+def _canonical(node: ast.AST) -> str:
+    """``node`` as text: its class and fields, without positions, and without fields that are None or empty (so
+    that a field added by a newer Python, such as ``type_params``, does not change the text)."""
+    if isinstance(node, ast.AST):
+        fields = [f"{k}={_canonical(v)}" for k, v in ast.iter_fields(node) if v is not None and v != []]
+        return f"{type(node).__name__}({','.join(fields)})"
+    if isinstance(node, list):
+        return "[" + ",".join(_canonical(v) for v in node) + "]"
+    return repr(node)
+
+
+def _strip_docstrings(tree: ast.AST) -> ast.AST:
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if (isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and body
+                and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant)
+                and isinstance(body[0].value.value, str)):
+            node.body = body[1:] or [ast.Pass()]
+    return tree
+
+
 def file_digest(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
+    """SHA-256 of a source file's code: of a Python file's syntax tree without docstrings (comments, docstrings and
+    layout do not change what a benchmark measures), of any other file's bytes."""
+    data = path.read_bytes()
+    if path.suffix == ".py":
+        try:
+            data = _canonical(_strip_docstrings(ast.parse(data, str(path)))).encode()
+        except SyntaxError:  # hashed as bytes: the benchmark could not have run it anyway
+            pass
+    return hashlib.sha256(data).hexdigest()
 
 
 def make_stamp(files: list[str], root: Path = ROOT) -> dict:
