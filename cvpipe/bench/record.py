@@ -11,8 +11,9 @@ captured); the file written is that JSON plus these top-level keys:
 - ``command`` (the equivalent ``cvpipe bench`` command line), ``wall_seconds``, ``cpus``, ``cpu_model``,
   ``load_average_1min`` (before and after the run) and ``versions`` (Python and the libraries the run imported).
 
-The result is written only when the benchmark succeeded, atomically, so a failed or interrupted run leaves the
-previous file in place.
+The result is written only when the benchmark printed its JSON (with ``exit_status`` when it exited non-zero, as
+the guard does for a row over its limit), atomically, so a failed or interrupted run leaves the previous file in
+place.
 """
 
 from __future__ import annotations
@@ -221,14 +222,15 @@ def record(name: str, data: str, folder: str | os.PathLike = "benchmarks", extra
         status = module.run(args)
     wall = time.perf_counter() - t0
     load_after = os.getloadavg()[0]
-    if status:
-        raise InputError(f"`{command_line(name, extra)}` exited with status {status}; {out} left as it was")
     try:
         result = json.loads(captured.getvalue())
     except json.JSONDecodeError as exc:
-        raise InputError(f"`{command_line(name, extra)}` printed no JSON document on stdout ({exc})") from exc
+        raise InputError(f"`{command_line(name, extra)}` exited with status {status} and printed no JSON document "
+                         f"on stdout ({exc}); {out} left as it was") from exc
     if not isinstance(result, dict):
         result = {"result": result}
+    if status:  # a result all the same (the guard's exit 1: a row over its limit), kept with the status
+        result["exit_status"] = status
     for measured in recipe.measures:
         importlib.import_module(measured)
     result.update({
