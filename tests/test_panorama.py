@@ -121,8 +121,9 @@ def test_distractor_is_dropped_with_reason(views, distractor):
 
 
 def test_cropped_panorama_has_no_empty_pixels(views):
-    # no input pixel is black, so a black output pixel can only be an empty one
-    imgs = [np.maximum(v, 1) for v in views[0]]
+    # no input pixel is darker than 32, so a black output pixel can only be an empty one (multi-band blending can
+    # undershoot a dark pixel by a few grey levels near a seam: inputs clamped at 1 gave 0 on one seam's staircase)
+    imgs = [np.maximum(v, 32) for v in views[0]]
     for projection in ("plane", "cylindrical", "spherical"):
         pano = panorama.stitch(imgs, warp=PanoramaWarpParams(projection=projection), rng=0)
         assert pano.mask.all(), projection

@@ -11,6 +11,7 @@ from cvpipe.bench.panorama import pair_error_median
 from cvpipe.commands import stitch as stitch_command
 from cvpipe.metrics import corner_error
 from cvpipe.params import PanoramaFeaturesParams, PanoramaMatchParams
+from cvpipe.samples import fit, photo
 
 from test_panorama import VIEW, _views
 
@@ -26,11 +27,11 @@ def test_tracking_corrects_a_homography_a_few_pixels_off(views):
     H_true = T[1] @ np.linalg.inv(T[0])
     off = np.array([[1.0, 0.004, 2.5], [-0.003, 1.0, -2.0], [0, 0, 1]]) @ H_true  # corners 2-4 px off
     assert corner_error(off, H_true, *VIEW) > 2.0
-    H, src, dst = panorama.track_pair(grays[0], grays[1], off, panorama.corners(grays[0]), 10, rng=0)
+    H, src, dst, tracked = panorama.track_pair(grays[0], grays[1], off, panorama.corners(grays[0]), 10, rng=0)
     # the tracks are sub-pixel, but they lie in the 145 px wide overlap and the corner error is measured at the far
     # corners of the view, about 175 px beyond it, where the fit extrapolates: 0.43 px measured, 1 px leaves room
     assert corner_error(H, H_true, *VIEW) < 1.0
-    assert len(src) == len(dst) >= 50
+    assert len(src) == len(dst) >= 50 and tracked >= len(src)
 
 
 def test_tracking_gives_up_without_enough_points(views):
@@ -45,7 +46,7 @@ def test_tracking_accepts_images_of_different_sizes(views):
     grays, _ = panorama.working_images(imgs, -1)
     H_true = T[1] @ np.linalg.inv(T[0])
     small = grays[1][:200, :300]  # the same pixels, cropped at the right and bottom: coordinates unchanged
-    H, _, _ = panorama.track_pair(grays[0], small, H_true, panorama.corners(grays[0]), 10, rng=0)
+    H, _, _, _ = panorama.track_pair(grays[0], small, H_true, panorama.corners(grays[0]), 10, rng=0)
     # the crop leaves 70 of the 98 tracks in a smaller overlap, so the fit extrapolates further (1.54 px measured
     # against 0.43 px uncropped); a padding that moved the coordinates would be off by the crop, tens of pixels
     assert corner_error(H, H_true, *VIEW) < 2.5
@@ -98,3 +99,12 @@ def test_pair_error_counts_a_left_out_image_as_a_failure():
     del G[2]  # two of three pairs fail: the median is a failure
     assert pair_error_median(G, gt, sizes) is None
     assert pair_error_median(G, {}, sizes) is None
+
+
+def test_fast_preset_drops_an_unrelated_photo(views):
+    # the tracks' own confidence test must not accept a pair that does not overlap: a photo of something else
+    # shares no homography with the views, by matches or by tracks
+    imgs, _ = views
+    pano = panorama.stitch([*imgs, fit(photo("coffee"), *VIEW)], **panorama.preset_sections("fast"), rng=0)
+    assert pano.registration.used == (0, 1, 2)
+    assert [k for k, _ in pano.registration.dropped] == [3]

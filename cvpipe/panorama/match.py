@@ -241,7 +241,9 @@ def match_graph(feats: Sequence[Features], sizes: Sequence[tuple[int, int]], *, 
     pair_refine : str
         One of :data:`~cvpipe.panorama.track.PAIR_REFINE_CHOICES`: ``"lk"`` fits an accepted pair's homography
         again to Lucas-Kanade tracks of image i's corners in the overlap (:func:`~cvpipe.panorama.track.track_pair`,
-        instead of the refit; the refit when too few points track); it needs ``images``.
+        instead of the refit; the refit when too few points track), and a pair whose matches fall short of
+        ``min_confidence`` only is accepted when its tracks pass the same test (``inliers / (8 + 0.3 * tracked)``);
+        it needs ``images``.
     images : sequence of (H, W) uint8, optional
         The grayscale images at the registration resolution (for ``pair_refine``).
     rng : seed or Generator
@@ -284,23 +286,30 @@ def match_graph(feats: Sequence[Features], sizes: Sequence[tuple[int, int]], *, 
         conf = k / (8.0 + 0.3 * len(pairs))
         I[i, j] = I[j, i] = k
         C[i, j] = C[j, i] = conf
-        why = _plausible(fit.H, sizes[i])
+        implausible = _plausible(fit.H, sizes[i])
+        why = implausible
         if k < min_inliers:
             why = f"{k} inliers < min_inliers {min_inliers}"
         elif conf < min_confidence:
             why = f"confidence {conf:.2f} < min_confidence {min_confidence}"
-        if why:
-            rejected[(i, j)] = why
-            return
         H, keep = fit.H, fit.inliers
-        if pair_refine == "lk":
+        if pair_refine == "lk" and implausible is None and k >= min_inliers:
             if i not in points:
                 points[i] = corners(images[i])
             tracked = track_pair(images[i], images[j], H, points[i], min_inliers, rng=rng)
             if tracked is not None and not _plausible(tracked[0], sizes[i]):
-                H, a, b = tracked
-                edges[(i, j)] = Edge(i, j, H / H[2, 2], a, b, conf)
-                return
+                H, a, b, tried = tracked
+                # the same test on the tracks: a pair the matches left just short of min_confidence (few binary
+                # features in a small overlap) is accepted when its tracks pass it
+                conf_t = len(a) / (8.0 + 0.3 * tried)
+                if conf >= min_confidence or conf_t >= min_confidence:
+                    if conf < min_confidence:
+                        C[i, j] = C[j, i] = conf_t
+                    edges[(i, j)] = Edge(i, j, H / H[2, 2], a, b, float(C[i, j]))
+                    return
+        if why:
+            rejected[(i, j)] = why
+            return
         if 0 < refit_threshold < ransac_threshold:
             H, keep = refit(src, dst, fit.H, fit.inliers, refit_threshold, min_inliers, sizes[i], rng)
         edges[(i, j)] = Edge(i, j, H / H[2, 2], src[keep], dst[keep], conf)

@@ -32,17 +32,32 @@ TRACK_THRESHOLD = 1.0
 CORNERS = 500
 CORNER_QUALITY = 0.01
 CORNER_SPACING = 8
+#: images larger than this (pixels) find their corners at half size (:func:`corners`)
+HALF_SIZE_PIXELS = 250_000
 
 
 def corners(gray: np.ndarray, n: int = CORNERS) -> np.ndarray:
-    """(M, 2) float64, M <= ``n``: the image's strongest Shi-Tomasi corners (``cv2.goodFeaturesToTrack``), at least
-    :data:`CORNER_SPACING` px apart."""
-    c = cv2.goodFeaturesToTrack(gray, n, CORNER_QUALITY, CORNER_SPACING, blockSize=7)
-    return np.zeros((0, 2)) if c is None else c.reshape(-1, 2).astype(np.float64)
+    """(M, 2) float64, M <= ``n``: the image's strongest Shi-Tomasi corners (``cv2.goodFeaturesToTrack``), about
+    :data:`CORNER_SPACING` px apart, in ``gray``'s pixels.
+
+    Above :data:`HALF_SIZE_PIXELS` they are found on the half-size image (20x cheaper than at full size: 1.9 against
+    36 ms on a 0.6 MP photo) and scaled back: a point only picks the patch that Lucas-Kanade then follows to a
+    fraction of a pixel, so it need not sit on the corner exactly; a small image keeps all its corners.
+    """
+    if gray.size <= HALF_SIZE_PIXELS:
+        c = cv2.goodFeaturesToTrack(gray, n, CORNER_QUALITY, CORNER_SPACING, blockSize=7)
+        return np.zeros((0, 2)) if c is None else c.reshape(-1, 2).astype(np.float64)
+    half = cv2.resize(gray, ((gray.shape[1] + 1) // 2, (gray.shape[0] + 1) // 2), interpolation=cv2.INTER_AREA)
+    c = cv2.goodFeaturesToTrack(half, n, CORNER_QUALITY, CORNER_SPACING / 2, blockSize=5)
+    if c is None:
+        return np.zeros((0, 2))
+    sx, sy = gray.shape[1] / half.shape[1], gray.shape[0] / half.shape[0]
+    c = c.reshape(-1, 2).astype(np.float64)
+    return np.column_stack([(c[:, 0] + 0.5) * sx - 0.5, (c[:, 1] + 0.5) * sy - 0.5])
 
 
 def track_pair(gray_i: np.ndarray, gray_j: np.ndarray, H: np.ndarray, points: np.ndarray, min_inliers: int,
-               threshold: float = TRACK_THRESHOLD, rng=None) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+               threshold: float = TRACK_THRESHOLD, rng=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, int] | None:
     """The homography of an accepted pair fitted again to Lucas-Kanade tracks of points of image i.
 
     Parameters
@@ -63,8 +78,9 @@ def track_pair(gray_i: np.ndarray, gray_j: np.ndarray, H: np.ndarray, points: np
 
     Returns
     -------
-    (H, src, dst) or None
-        The new homography and the tracks it keeps, or None when too few points track (the caller keeps ``H``).
+    (H, src, dst, tracked) or None
+        The new homography, the tracks it keeps (its inliers) and the number of points tracked, or None when too
+        few points track (the caller keeps ``H``).
     """
     h, w = gray_j.shape
     points = np.asarray(points, np.float64).reshape(-1, 2)
@@ -96,4 +112,4 @@ def track_pair(gray_i: np.ndarray, gray_j: np.ndarray, H: np.ndarray, points: np
         return None
     if int(fit.inliers.sum()) < min_inliers:
         return None
-    return fit.H, a[fit.inliers], b[fit.inliers]
+    return fit.H, a[fit.inliers], b[fit.inliers], len(a)
