@@ -333,27 +333,73 @@ def _cv_stitch(images):
     return pano if status == cv2.Stitcher_OK else None
 
 
-def row_stitch(ctx: dict) -> list[Row]:
-    """``panorama.stitch`` / ``cv2.Stitcher`` in this process per set: worst ratio; accuracy: images each used."""
-    from .. import io, panorama
+def _panorama_truth(paths: list[Path]) -> dict[tuple[int, int], np.ndarray]:
+    """Ground-truth pair homographies (input position i -> j) of a samples set from its ``truth.json`` (``H[i]``
+    maps image i to the first image); empty when the set has none."""
+    import numpy as np
 
-    ratios, used = [], []
+    from .. import io
+
+    truth = paths[0].parent.parent / "truth.json"
+    if not truth.is_file():
+        return {}
+    name = paths[0].parent.name
+    for s in io.load_json(truth).get("sets", []):
+        if s["name"] == name:
+            pos = {Path(f).name: k for k, f in enumerate(s["images"])}
+            H = {pos[p.name]: np.array(s["H"][pos[p.name]]) for p in paths if p.name in pos}
+            return {(i, j): np.linalg.inv(H[j]) @ H[i] for i in H for j in H if i != j}
+    return {}
+
+
+def row_stitch(ctx: dict) -> list[Row]:
+    """``panorama.stitch`` with each preset (``default``, ``fast``) / ``cv2.Stitcher`` in this process per set:
+    worst ratio per preset; accuracy: on sets with ground truth, the median corner error of the pair homographies
+    of ours (each preset) and of those cv2.Stitcher's cameras imply (:func:`cvpipe.bench.panorama.pair_error_median`),
+    elsewhere the images each used."""
+    from .. import io, panorama
+    from ..params import PanoramaFeaturesParams, PanoramaMatchParams, PanoramaWarpParams
+    from .panorama import pair_error_median
+
+    presets = ("default", "fast")
+    ratios = {k: [] for k in presets}
+    notes, names = [], []
     for name, paths in ctx["progress"](list(_panorama_sets(ctx).items()), "guard stitch"):
         images = [io.read_image(p) for p in paths]
+        sizes = [(im.shape[1], im.shape[0]) for im in images]
+        names.append(name)
 
-        def ours(images=images):
+        def ours(preset, images=images):
             try:
-                return panorama.stitch(images, rng=0)
+                return panorama.stitch(images, **panorama.preset_sections(preset), rng=0)
             except EstimationError:
                 return None
 
-        t = best_of({"ours": ours, "opencv": lambda: _cv_stitch(images)}, max(1, ctx["repeats"] // 3))
-        ratios.append(t["ours"] / t["opencv"])
-        pano = ours()
-        used.append((name, len(images), 0 if pano is None else len(pano.registration.used), _cv_stitch(images) is not None))
-    acc = "; ".join(f"{n}: ours uses {u}/{k}, OpenCV {'stitched' if c else 'failed'}" for n, k, u, c in used)
-    return [Row("stitch_max", max(ratios), "x", "panorama.stitch / cv2.Stitcher in process, worst set", acc,
-                len(ratios))]
+        fns = {k: (lambda k=k: ours(k)) for k in presets}
+        t = best_of({**fns, "opencv": lambda: _cv_stitch(images)}, max(1, ctx["repeats"] // 3))
+        for k in presets:
+            ratios[k].append(t[k] / t["opencv"])
+        gt = _panorama_truth(paths)
+        cv = panorama.opencv_stitch_cameras(images, PanoramaFeaturesParams().work_megapix,
+                                            PanoramaWarpParams().compose_megapix,
+                                            PanoramaMatchParams().min_confidence, seed=0)
+        got = {k: ours(k) for k in presets}
+        fmt = (lambda v: "over half the pairs failed" if v is None else f"{v:.2f} px")
+        if gt:
+            errs = {k: None if p is None else pair_error_median(p.homographies, gt, sizes) for k, p in got.items()}
+            notes.append(f"{name}: " + ", ".join(f"{k} {fmt(errs[k])}" for k in presets)
+                         + f", cv2 {fmt(pair_error_median(cv.homographies, gt, sizes))}")
+        else:
+            notes.append(f"{name}: " + ", ".join(f"{k} uses {0 if p is None else len(p.registration.used)}"
+                                                 f"/{len(images)}" for k, p in got.items())
+                         + f", cv2 {len(cv.used)}/{len(images)}")
+    acc = "GT pair error (median corner px) or images used: " + "; ".join(notes)
+    return [Row("stitch_max", max(ratios["default"]), "x",
+                "panorama.stitch (default preset) / cv2.Stitcher in process, worst set", acc, len(ratios["default"]),
+                {"ratio_per_set": dict(zip(names, ratios["default"]))}),
+            Row("stitch_fast_max", max(ratios["fast"]), "x",
+                "panorama.stitch --preset fast / cv2.Stitcher in process, worst set", "as stitch_max",
+                len(ratios["fast"]), {"ratio_per_set": dict(zip(names, ratios["fast"]))})]
 
 
 _CV2_STITCH_COMMAND = """
