@@ -573,3 +573,20 @@ def test_panorama_is_an_alias_of_stitch(cast_pair, tmp_path, capsys):
         del d["out"]
     assert docs[0] == docs[1]
     assert np.array_equal(cv2.imread(str(tmp_path / "stitch.png")), cv2.imread(str(tmp_path / "panorama.png")))
+
+
+@pytest.mark.parametrize("name", COMMANDS)
+def test_help_examples_write_nothing_that_git_would_see(name):
+    """Run from the repository's root, an example writes only under outputs/examples/ (ignored by git) or, for
+    init, a new repository beside this one: trying the examples leaves `git status` clean."""
+    argv = shlex.split(_module(name).EXAMPLE)[1:]
+    written = [argv[i + 1] for i, a in enumerate(argv[:-1]) if a in ("--overlay", "-o", "--out")]
+    if name == "init":
+        written = [argv[1]]
+        assert Path(argv[1]).parts[0] == ".."
+    else:
+        assert all(w.startswith("outputs/examples/") for w in written), written
+    for w in written:
+        if not w.startswith(".."):
+            ignored = subprocess.run(["git", "check-ignore", "-q", w], cwd=ROOT)
+            assert ignored.returncode == 0, f"{w} is not ignored by git"

@@ -10,7 +10,7 @@ from . import (DETECTORS, add_feature_arguments, add_param_options, add_result_a
 
 HELP = "estimate the homography mapping image A to image B (ours or OpenCV's RANSAC/MAGSAC)"
 EXAMPLE = ("cvpipe homography data/samples/homography/0_astronaut_a.jpg data/samples/homography/0_astronaut_b.jpg "
-           "--overlay check.png --json")
+           "--overlay outputs/examples/check.png --json")
 
 #: ``--method`` choices: the keys of ``cvpipe.homography.METHODS`` (params.yaml's spelling; a test keeps them equal)
 METHODS = ("ours", "opencv_ransac", "opencv_magsac")

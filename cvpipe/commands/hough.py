@@ -10,7 +10,7 @@ from ..params import HoughEdgesParams, HoughLinesParams
 from . import add_result_arguments, final_output, note, overlay_paths, param_type, progress, read_images, step
 
 HELP = "find straight lines (standard Hough transform, cv2.HoughLines conventions)"
-EXAMPLE = "cvpipe hough data/samples/hough/synthetic_grid.png --threshold 100 --max-lines 10 --overlay lines.png"
+EXAMPLE = "cvpipe hough data/samples/hough/synthetic_grid.png --threshold 100 --max-lines 10 --overlay outputs/examples/lines.png"
 
 #: ``--method`` choices, the keys of ``cvpipe.hough.IMPLEMENTATIONS`` (a test keeps the two equal)
 METHODS = ("ours", "opencv")

@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 HELP = "set up cvpipe's pipeline in your own git + DVC repository (writes dvc.yaml, params.yaml, .gitignore)"
-EXAMPLE = "cvpipe init my-project --tasks hough"
+EXAMPLE = "cvpipe init ../my-project --tasks hough"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -16,7 +16,7 @@ if TYPE_CHECKING:
     from .. import defect as defects
 
 HELP = "judge probe images faulty or perfect against a golden reference and outline the defects"
-EXAMPLE = "cvpipe inspect data/samples/defect/reference.png data/samples/defect/probes/*.png --out out/ --json"
+EXAMPLE = "cvpipe inspect data/samples/defect/reference.png data/samples/defect/probes/*.png --out outputs/examples/inspect/ --json"
 
 #: the defaults of ``cvpipe.defect.inspect``, without importing the algorithm package
 _DEFAULTS = InspectParams()

@@ -20,8 +20,8 @@ if TYPE_CHECKING:
 HELP = ("disparity map of a stereo pair (float32 .npy of the LEFT image, NaN = invalid), rectified first with "
         "--rectify; depth and a point cloud with --calib")
 EXAMPLE = ("cvpipe stereo data/samples/stereo/motorcycle/left.png data/samples/stereo/motorcycle/right.png "
-           "--max-disp 64 -o disp.npy "
-           "--overlay disp.png --json")
+           "--max-disp 64 -o outputs/examples/disp.npy "
+           "--overlay outputs/examples/disp.png --json")
 
 #: ``--method`` (params.yaml's spelling, the keys of cvpipe.stereo.METHODS) -> the params dataclass whose defaults
 #: the command uses; ``opencv-sgbm`` with a hyphen is accepted too

@@ -12,7 +12,7 @@ from . import (DETECTORS, add_feature_arguments, add_param_options, add_result_a
                final_output, log, progress, step, with_flags)
 
 HELP = "stitch overlapping photos (any order) into one seamless, cropped panorama"
-EXAMPLE = "cvpipe stitch data/samples/panorama/coffee/*.jpg -o pano.png --projection plane --json"
+EXAMPLE = "cvpipe stitch data/samples/panorama/coffee/*.jpg -o outputs/examples/pano.png --projection plane --json"
 
 _F, _M, _W, _B = PanoramaFeaturesParams(), PanoramaMatchParams(), PanoramaWarpParams(), PanoramaBlendParams()
 _H = PanoramaHomographiesParams()
