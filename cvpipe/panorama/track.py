@@ -26,6 +26,9 @@ DEFAULT_PAIR_REFINE = "none"
 #: base: the homography's prediction is within a few pixels, which level 2 (a quarter of the resolution) absorbs
 LK_WINDOW = 15
 LK_LEVELS = 2
+#: Lucas-Kanade stops after this many iterations per level or a step below this many pixels
+LK_ITERATIONS = 30
+LK_EPS = 0.01
 #: inlier threshold of the fit to the tracks, pixels: tracks are sub-pixel, so a tight threshold keeps the precise ones
 TRACK_THRESHOLD = 1.0
 #: Shi-Tomasi corners per image (:func:`corners`), their quality relative to the best and their spacing in pixels
@@ -97,7 +100,7 @@ def track_pair(gray_i: np.ndarray, gray_j: np.ndarray, H: np.ndarray, points: np
         gray_j = cv2.copyMakeBorder(gray_j, 0, hh - h, 0, ww - w, cv2.BORDER_REPLICATE)
     p0 = np.ascontiguousarray(points[inside], np.float32).reshape(-1, 1, 2)
     guess = np.ascontiguousarray(guess[inside], np.float32).reshape(-1, 1, 2)
-    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01)
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, LK_ITERATIONS, LK_EPS)
     win = (LK_WINDOW, LK_WINDOW)
     p1, ok, _ = cv2.calcOpticalFlowPyrLK(gray_i, gray_j, p0, guess, winSize=win, maxLevel=LK_LEVELS,
                                          criteria=crit, flags=cv2.OPTFLOW_USE_INITIAL_FLOW)

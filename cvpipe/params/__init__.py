@@ -236,7 +236,7 @@ class PanoramaMatchParams(Section):
     """``panorama.match``: pairwise matching and the acceptance of a pair as an edge of the match graph; only each
     image's ``candidates`` most promising partners are matched in full (0: every pair). An accepted pair's
     homography is refitted on its inliers with the tighter ``refit_threshold`` (0: no refit), or, with
-    ``pair_refine: lk``, fitted to Lucas-Kanade tracks of its inliers (:mod:`cvpipe.panorama.track`)."""
+    ``pair_refine: lk``, fitted to Lucas-Kanade tracks of corners in its overlap (:mod:`cvpipe.panorama.track`)."""
 
     ratio: Ratio = 0.8
     ransac_threshold: RansacThreshold = 3.0
