@@ -11,6 +11,11 @@ waits for is also measured: the whole ``cvpipe stitch`` command in a subprocess 
 stitching, writing), against ``cv2.Stitcher`` in this process, in wall time and in CPU time (user + system of all
 threads: the command's from ``getrusage`` of the finished child, ``cv2.Stitcher``'s from this process's CPU clock),
 which a busy shared machine distorts much less.
+Both axes per set and preset (``--presets``, :mod:`cvpipe.panorama.presets`): the in-process time of each of our
+presets over cv2.Stitcher's, and the median corner error over the ground-truth pairs of the pair homographies
+composed from each stitcher's global geometry (ours: ``Panorama.homographies``; cv2.Stitcher, seeded with
+``cv2.setRNGSeed(0)``: those its cameras imply, :func:`cvpipe.panorama.camera_homographies`), an image left out
+counting as a failure for both (:func:`pair_error_median`).
 On the sets of :data:`EXPOSURE_SETS` every exposure compensator (:data:`cvpipe.panorama.GAIN_CHOICES`) blends the
 same warped images, and the colour difference across the seam in the sky is measured (:func:`seam_colour_difference`).
 """
