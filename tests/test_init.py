@@ -138,7 +138,7 @@ def test_init_writes_a_pipeline_and_running_it_again_keeps_the_users_edits(tmp_p
     assert (repo / ".git").is_dir() and (repo / ".dvc").is_dir()
     dvc = yaml.safe_load((repo / "dvc.yaml").read_text())
     params = yaml.safe_load((repo / "params.yaml").read_text())
-    assert set(dvc["stages"]) == {"hough_edges", "hough_lines", "hough_report", "report"}
+    assert set(dvc["stages"]) == {"hough_data", "hough_edges", "hough_lines", "hough_report", "report"}
     assert params["hough"]["data"] == "data/lines" and params["cvpipe"]["version"] == __version__
     ignore = (repo / ".gitignore").read_text().splitlines()
     assert set(pipeline.GITIGNORE_LINES) <= set(ignore)
@@ -244,3 +244,21 @@ def test_cvpipe_stage_refuses_an_unknown_stage(capsys):
     assert cli.main(["stage", "hough_edge"]) == 2
     err = capsys.readouterr().err
     assert "unknown stage `hough_edge`" in err and "hough_edges" in err
+
+
+def test_task_data_knows_how_a_copy_of_the_repository_gets_the_folder(tmp_path, monkeypatch):
+    from stages.task_data import tracked_by
+
+    monkeypatch.chdir(tmp_path)
+    subprocess.run(["git", "init", "-q"], check=True)
+    for d in ("data/mine/a", "data/mine/b", "data/git", "data/samples/hough"):
+        (tmp_path / d).mkdir(parents=True)
+        (tmp_path / d / "x.png").write_bytes(b"x")
+    assert tracked_by("data/mine/a") is None
+    (tmp_path / "data" / "mine.dvc").write_text("outs:\n- path: mine\n")  # `dvc add data/mine` covers a and b
+    assert tracked_by("data/mine/a") == "dvc" and tracked_by("data/mine/b") == "dvc"
+    subprocess.run(["git", "add", "data/git/x.png"], check=True)
+    assert tracked_by("data/git") == "git"
+    assert tracked_by("data/samples/hough") is None
+    (tmp_path / "dvc.yaml").write_text("stages:\n  samples:\n    cmd: x\n    outs:\n      - data/samples\n")
+    assert tracked_by("data/samples/hough") == "dvc"  # a stage's output: restored from DVC's cache

@@ -32,18 +32,42 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "upgrade, every stage reruns once with it")
 
 
-def template_file() -> Path:
-    """The pipeline template: the ``dvc.yaml`` shipped in the package (``cvpipe/pipeline/``), or, for a checkout of
-    this project installed in editable mode, the repository's own."""
+#: the templates `cvpipe init` writes from, as this repository holds them (installed: all in cvpipe/pipeline/)
+TEMPLATES = {"dvc.yaml": "dvc.yaml", "offline.html": ".dvc/plots/offline.html"}
+#: where a repository's `dvc plots show/diff` page template goes (DVC's config names it relative to .dvc/)
+PLOTS_PAGE = "plots/offline.html"
+
+
+def template_file(name: str = "dvc.yaml") -> Path:
+    """A template of ``cvpipe init`` (:data:`TEMPLATES`): shipped in the package (``cvpipe/pipeline/``), or, for a
+    checkout of this project installed in editable mode, the repository's own file."""
     import cvpipe
 
     package = Path(cvpipe.__file__).resolve().parent
-    installed, checkout = package / "pipeline" / "dvc.yaml", package.parent / "dvc.yaml"
+    installed, checkout = package / "pipeline" / name, package.parent / TEMPLATES[name]
     if installed.is_file():
         return installed
     if checkout.is_file() and (package.parent / "stages" / "_runner.py").is_file():
         return checkout
-    raise FileNotFoundError(f"cvpipe's pipeline template (dvc.yaml) is missing from {package}: reinstall cvpipe")
+    raise FileNotFoundError(f"cvpipe's template {name} is missing from {package}: reinstall cvpipe")
+
+
+def _offline_plots(root: Path) -> list[str]:
+    """The page template that keeps `dvc plots show/diff` offline, and DVC's setting that uses it, where missing."""
+    import shutil
+
+    done = []
+    page = root / ".dvc" / PLOTS_PAGE
+    if not page.exists():
+        page.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(template_file("offline.html"), page)
+        done.append(f".dvc/{PLOTS_PAGE}: written")
+    got = subprocess.run([sys.executable, "-m", "dvc", "config", "plots.html_template"], cwd=root,
+                         capture_output=True, text=True)
+    if got.returncode != 0 or not got.stdout.strip():
+        _run([sys.executable, "-m", "dvc", "config", "plots.html_template", PLOTS_PAGE], root)
+        done.append(f"dvc config plots.html_template {PLOTS_PAGE}")
+    return done
 
 
 def _yaml():
@@ -187,6 +211,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         _dump(y, dvc, dvc_path, pipeline.PIPELINE_HEADER)
         done.append(f"dvc.yaml: written ({len(dvc['stages'])} stages)")
+    done += _offline_plots(root)
     text = read_text(ignore_path, ".gitignore") if ignore_path.exists() else ""
     lines = pipeline.missing_lines(text, pipeline.GITIGNORE_LINES)
     if lines:
