@@ -11,6 +11,8 @@ from ._runner import Stage, run
 #: overlays of found logos drawn (plus up to MAX_WRONG wrong answers on scenes with ground truth)
 MAX_FOUND = 6
 MAX_WRONG = 2
+#: missed scenes (labelled with a brand, answered otherwise) in the strip of their best rejected fits
+MAX_MISSED = 8
 
 
 def logo_report(st: Stage) -> None:
@@ -50,6 +52,13 @@ def logo_report(st: Stage) -> None:
         blue = "blue = true outline, " if r["labelled"] else ""
         pictures.append({"path": path.as_posix(), "caption": f"{caption}; green = found outline, {blue}orange = "
                          "inlier matches"})
+    missed = [r for r in recs if r["labelled"] and r["truth"] is not None and r["brand"] != r["truth"]][:MAX_MISSED]
+    if missed:
+        strip = logo.draw_missed([io.read_image(scenes[r["scene"]].path, "color") for r in missed], missed)
+        io.save_picture(out / f"missed_{best}.png", strip)
+        pictures.append({"path": (out / f"missed_{best}.png").as_posix(),
+                         "caption": f"{best}: scenes whose logo was missed (first {len(missed)}), blue = true "
+                                    "outline, red = the true brand's best rejected fit, and why it was rejected"})
     dropped = logo.merge_dropped({m: io.load_json(Path(a.verify) / m / "dropped.json") for m in a.methods})
     references = sum(len(files) for files in inputs.gallery.values())
     io.save_json(a.summary, logo.report_summary(decisions, brands, references, vp.score_threshold, pictures,

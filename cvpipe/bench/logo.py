@@ -28,7 +28,8 @@ import typing
 from pathlib import Path
 
 from ..errors import InputError
-from ..params import DEFAULT_EXTRA_SCORE, Detector, LogoFeaturesParams, LogoMatchParams, LogoVerifyParams, load_section
+from ..params import (DEFAULT_EXTRA_SCORE, LogoFeaturesParams, LogoMatchParams, LogoMethod, LogoVerifyParams,
+                      load_section)
 
 if typing.TYPE_CHECKING:  # annotations only: the modules are imported inside the functions that use them,
     # so that `cvpipe bench logo --help` imports neither numpy nor cv2
@@ -42,15 +43,16 @@ EXTRA_LABELS = Path(__file__).with_name("flickrlogos_extra_labels.csv")
 HELP = "logo recognition on the FlickrLogos-27 subset: precision, recall, accuracy, PR curve, time per scene"
 EXAMPLE = "cvpipe bench logo --data ../shared/data --json"
 SUBSET = "flickrlogos27_subset"
-#: the detectors compared, in cvpipe.features.DETECTORS order, read from the params model (no cv2 for --help)
-DETECTORS = typing.get_args(Detector)
+#: the methods compared (each detector, and ``fused``: cvpipe.logo.METHODS), read from the params model (no cv2 for
+#: --help)
+METHODS = typing.get_args(LogoMethod)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--data", default=os.environ.get("CVPIPE_DATA"),
                         help="data root holding flickrlogos27_subset/ (default: $CVPIPE_DATA)")
-    parser.add_argument("--methods", nargs="+", default=list(DETECTORS), choices=list(DETECTORS),
-                        help="detectors to compare (default: all four)")
+    parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS),
+                        help="methods to compare: a detector, or fused (several under one decision; default: all)")
     parser.add_argument("--params", default="params.yaml",
                         help="params.yaml with the logo.* sections (default: params.yaml; dataclass defaults "
                              "when the file does not exist)")
@@ -212,35 +214,43 @@ def run_benchmark(root: Path, methods: list[str], fp: LogoFeaturesParams, mp: Lo
 
     gallery_imgs, tests = load_subset(root, min_box)
     extra = load_extra_labels()
-    galleries, gallery_time = {}, {}
-    for m in methods:
+    needed = list(dict.fromkeys(d for m in methods for d in logo.method_detectors(m)))
+    by_detector, detector_time = {}, {}
+    for d in needed:
         t0 = time.perf_counter()
-        refs = [logo.Reference(b, n, detect(g, m, fp.max_features, _mask(g.shape, box)), (g.shape[1], g.shape[0]),
+        refs = [logo.Reference(b, n, detect(g, d, fp.max_features, _mask(g.shape, box)), (g.shape[1], g.shape[0]),
                                 box) for b, n, g, box in gallery_imgs]
-        galleries[m] = logo.build_gallery(refs, mp.min_features, mp.reference_features)
-        gallery_time[m] = time.perf_counter() - t0
+        by_detector[d] = logo.build_gallery(refs, mp.min_features, mp.reference_features)
+        detector_time[d] = time.perf_counter() - t0
+    galleries = {m: {d: by_detector[d] for d in logo.method_detectors(m)} for m in methods}
+    gallery_time = {m: sum(detector_time[d] for d in galleries[m]) for m in methods}
+
+    def recognize(m: str, g: np.ndarray) -> logo.Detection:
+        # a method detects its own keypoints, so that its time per scene covers everything it needs
+        feats = {d: detect(g, d, fp.max_features, min_long_side=fp.scene_min_long_side) for d in galleries[m]}
+        return logo.recognize_fused(galleries[m], feats, (g.shape[1], g.shape[0]), mp, vp, seed)
+
     scenes = [(f, b, _shrink(io.read_image(root / f, "gray"), scene_scale)) for f, b in tests]
     # warm-up: one scene per method (FLANN, OpenCV thread pools, scipy imports)
     for m in methods:
-        g = scenes[0][2]
-        logo.recognize(galleries[m], detect(g, m, fp.max_features, min_long_side=fp.scene_min_long_side),
-                        (g.shape[1], g.shape[0]), mp, vp, seed)
+        recognize(m, scenes[0][2])
     times = {m: [] for m in methods}
     answers = {m: [] for m in methods}
     for f, brand, g in tqdm(scenes, desc="logo bench", disable=None):
         for m in methods:  # interleaved, so load changes on the shared machine hit every method alike
             t0 = time.perf_counter()
-            feats = detect(g, m, fp.max_features, min_long_side=fp.scene_min_long_side)
-            det = logo.recognize(galleries[m], feats, (g.shape[1], g.shape[0]), mp, vp, seed)
+            det = recognize(m, g)
             times[m].append(time.perf_counter() - t0)
             best = det.best
             answers[m].append({"scene": f, "truth": brand, "brand": det.brand,
                                "best_brand": best.brand if best else None, "score": det.score,
-                               "inliers": det.inliers,
+                               "inliers": det.inliers, "detector": best.detector if best else None,
                                "truth_all": sorted(({brand} - {None}) | extra.get(f, set())),
                                "found": found_list(det, vp.score_threshold)})
-    result = {"protocol": {"gallery_references": {m: len(galleries[m].references) for m in methods},
-                           "gallery_dropped": {m: len(galleries[m].dropped) for m in methods},
+    result = {"protocol": {"gallery_references": {m: sum(len(g.references) for g in galleries[m].values())
+                                                  for m in methods},
+                           "gallery_dropped": {m: sum(len(g.dropped) for g in galleries[m].values())
+                                               for m in methods},
                            "test_scenes": len(tests), "with_logo": sum(b is not None for _, b in tests),
                            "score_threshold": vp.score_threshold, "scene_scale": scene_scale,
                            "extra_score": extra_score, "extra_labels": _extra_count(extra)},
@@ -251,7 +261,7 @@ def run_benchmark(root: Path, methods: list[str], fp: LogoFeaturesParams, mp: Lo
                             vp.score_threshold)
         ev["time_per_scene_median_s"] = statistics.median(times[m])
         ev["gallery_index_s"] = gallery_time[m]
-        _summarise(ev)
+        _summarise(ev, a, vp.score_threshold)
         ev["several_brands"] = multi_summary(a, extra_score, vp.score_threshold)
         ev["scenes_detail"] = a
         result["methods"][m] = ev
@@ -277,31 +287,55 @@ def run_leave_one_out(root: Path, methods: list[str], fp: LogoFeaturesParams, mp
                                  "score_threshold": vp.score_threshold, "scene_scale": scene_scale,
                                  "extra_score": extra_score, "extra_labels": _extra_count(extra)},
                     "methods": {}}
+    needed = list(dict.fromkeys(d for m in methods for d in logo.method_detectors(m)))
+    refs = {d: [(n.split("[")[0] if box is not None else None,
+                 logo.Reference(b, n, detect(g, d, fp.max_features, _mask(g.shape, box)), (g.shape[1], g.shape[0]),
+                                box)) for b, n, g, box in gallery_imgs] for d in needed}
+    answers: dict[str, list[dict]] = {m: [] for m in methods}
+    for photo, (brand, gray) in tqdm(sorted(photos.items()), desc="loo", disable=None):
+        small = _shrink(gray, scene_scale)
+        size = (small.shape[1], small.shape[0])
+        scenes = {d: detect(small, d, fp.max_features, min_long_side=fp.scene_min_long_side) for d in needed}
+        for truth in (brand, None):
+            galleries = {d: logo.build_gallery([r for src, r in refs[d] if src != photo and
+                                                (truth is not None or r.brand != brand)],
+                                               mp.min_features, mp.reference_features) for d in needed}
+            matches = {d: logo.match_scene(galleries[d], scenes[d], mp) for d in needed}
+            # every brand the photo holds that this gallery knows (without its own brand: the others)
+            truth_all = (({brand} | extra.get(photo, set())) - ({brand} if truth is None else set()))
+            known = set(galleries[needed[0]].brands)
+            for m in methods:
+                ds = logo.method_detectors(m)
+                det = logo.decide(logo.verify_fused({d: galleries[d] for d in ds}, {d: matches[d] for d in ds},
+                                                    {d: scenes[d] for d in ds}, size, vp, seed), vp)
+                answers[m].append({"scene": photo, "truth": truth, "brand": det.brand,
+                                   "best_brand": det.best.brand if det.best else None, "score": det.score,
+                                   "inliers": det.inliers, "detector": det.best.detector if det.best else None,
+                                   "truth_all": sorted(truth_all & known),
+                                   "found": found_list(det, vp.score_threshold)})
     for m in methods:
-        refs = [(n.split("[")[0] if box is not None else None,
-                 logo.Reference(b, n, detect(g, m, fp.max_features, _mask(g.shape, box)), (g.shape[1], g.shape[0]),
-                                 box)) for b, n, g, box in gallery_imgs]
-        answers = []
-        for photo, (brand, gray) in tqdm(sorted(photos.items()), desc=f"loo {m}", disable=None):
-            small = _shrink(gray, scene_scale)
-            scene = detect(small, m, fp.max_features, min_long_side=fp.scene_min_long_side)
-            for truth in (brand, None):
-                keep = [r for src, r in refs if src != photo and (truth is not None or r.brand != brand)]
-                gallery = logo.build_gallery(keep, mp.min_features, mp.reference_features)
-                det = logo.recognize(gallery, scene, (small.shape[1], small.shape[0]), mp, vp, seed)
-                # every brand the photo holds that this gallery knows (without its own brand: the others)
-                truth_all = (({brand} | extra.get(photo, set())) - ({brand} if truth is None else set()))
-                answers.append({"scene": photo, "truth": truth, "brand": det.brand,
-                                "best_brand": det.best.brand if det.best else None, "score": det.score,
-                                "inliers": det.inliers, "truth_all": sorted(truth_all & set(gallery.brands)),
-                                "found": found_list(det, vp.score_threshold)})
-        ev = logo.evaluate([x["truth"] for x in answers], [x["best_brand"] for x in answers],
-                            [x["score"] for x in answers], vp.score_threshold)
-        _summarise(ev)
-        ev["several_brands"] = multi_summary(answers, extra_score, vp.score_threshold)
-        ev["scenes_detail"] = answers
+        ev = logo.evaluate([x["truth"] for x in answers[m]], [x["best_brand"] for x in answers[m]],
+                            [x["score"] for x in answers[m]], vp.score_threshold)
+        _summarise(ev, answers[m], vp.score_threshold)
+        ev["several_brands"] = multi_summary(answers[m], extra_score, vp.score_threshold)
+        ev["scenes_detail"] = answers[m]
         result["methods"][m] = ev
     return result
+
+
+def per_brand(answers: list[dict], threshold: float) -> dict[str, dict]:
+    """``brand -> {"scenes", "found", "recall"}`` over the scenes whose one-brand label is that brand: found = the
+    brand answered at ``threshold``."""
+    out: dict[str, dict] = {}
+    for a in answers:
+        if a["truth"] is None:
+            continue
+        row = out.setdefault(a["truth"], {"scenes": 0, "found": 0})
+        row["scenes"] += 1
+        row["found"] += int(a["best_brand"] == a["truth"] and a["score"] >= threshold)
+    for row in out.values():
+        row["recall"] = row["found"] / row["scenes"]
+    return dict(sorted(out.items()))
 
 
 def _extra_count(extra: dict[str, set[str]]) -> int:
@@ -320,9 +354,10 @@ def _print_several(res: dict) -> None:
               f"{s['recall']:8.3f} {s['answered']:6d} {s['correct']:6d} {s['positives']:5d}")
 
 
-def _summarise(ev: dict) -> None:
-    """Add the two operating points of the logo target (precision >= 0.95 at recall >= 0.70, BENCHMARKS "logo") to an
-    :func:`cvpipe.logo.evaluate` result."""
+def _summarise(ev: dict, answers: list[dict], threshold: float) -> None:
+    """Add the two operating points of the logo target (precision >= 0.95 at recall >= 0.70, BENCHMARKS "logo") and
+    the recall per brand (:func:`per_brand`) to an :func:`cvpipe.logo.evaluate` result."""
+    ev["per_brand"] = per_brand(answers, threshold)
     ev["best_precision_at_recall_0.70"] = max((c["precision"] for c in ev["curve"] if c["recall"] >= 0.70),
                                               default=None)
     ev["best_recall_at_precision_0.95"] = max((c["recall"] for c in ev["curve"] if c["precision"] >= 0.95),

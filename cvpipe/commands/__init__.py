@@ -103,12 +103,14 @@ def note(message: str) -> None:
 DETECTORS = ("akaze", "brisk", "orb", "sift")
 
 
-def add_feature_arguments(parser, detector: str, max_features: int, ratio: float, flag: str = "--detector") -> None:
-    """``--detector`` (or ``flag``), ``--max-features`` and ``--ratio``, with the defaults of the command's
-    parameter sections, the numbers checked by the fields they set (:func:`param_type`)."""
+def add_feature_arguments(parser, detector: str, max_features: int, ratio: float, flag: str = "--detector",
+                          choices: tuple[str, ...] = DETECTORS) -> None:
+    """``--detector`` (or ``flag``, whose ``choices`` default to :data:`DETECTORS`), ``--max-features`` and
+    ``--ratio``, with the defaults of the command's parameter sections, the numbers checked by the fields they set
+    (:func:`param_type`)."""
     from ..params import FeaturesParams, MatchParams
 
-    parser.add_argument(flag, dest=flag.lstrip("-").replace("-", "_"), type=str.lower, choices=DETECTORS,
+    parser.add_argument(flag, dest=flag.lstrip("-").replace("-", "_"), type=str.lower, choices=choices,
                         default=detector, help=f"keypoint detector (default {detector})")
     parser.add_argument("--max-features", type=param_type(FeaturesParams, "max_features"), default=max_features,
                         help=f"keypoints per image (default {max_features})")

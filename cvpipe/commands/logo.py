@@ -5,10 +5,11 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import typing
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ..params import HomographyEstimateParams, LogoFeaturesParams, LogoMatchParams, LogoVerifyParams
+from ..params import HomographyEstimateParams, LogoFeaturesParams, LogoMatchParams, LogoMethod, LogoVerifyParams
 from . import (DETECTORS, add_feature_arguments, add_result_arguments, final_output,  # noqa: F401
                note, overlay_paths, param_type, progress, read_images,
                step)  # DETECTORS: the ``--method`` choices (a test keeps them equal)
@@ -18,9 +19,11 @@ if TYPE_CHECKING:
 
 HELP = "recognise gallery logos in scene photos (brand or none, and the logo outline)"
 EXAMPLE = ("cvpipe logo data/samples/logo/scenes/scene_00.jpg --gallery data/samples/logo/gallery "
-           "--overlay logo.png --json")
+           "--overlay outputs/examples/logo.png --json")
 #: ``--overlay`` with several scenes: ``<folder>/<scene stem>_logo.png``
 SUFFIX = "_logo"
+#: ``--method`` choices: the keys of ``cvpipe.logo.METHODS`` (a detector, or ``fused``; a test keeps them equal)
+METHODS = typing.get_args(LogoMethod)
 
 
 def gallery_files(folder: str | Path) -> list[tuple[str, Path]]:
@@ -121,8 +124,9 @@ def recognize_scene(item: tuple, shared: tuple) -> tuple[dict, list, list]:
     item : tuple
         ``(scene name, gray image or None, read error or None)`` from :func:`cvpipe.commands.read_images`.
     shared : tuple
-        ``(Gallery, method, max_features, min_long_side, LogoMatchParams, LogoVerifyParams, seed)``; the gallery
-        travels to a worker as its references and is indexed again there (:class:`cvpipe.logo.Gallery`).
+        ``({detector: Gallery}, max_features, min_long_side, LogoMatchParams, LogoVerifyParams, seed)``: the
+        galleries of the method's detectors; a gallery travels to a worker as its references and is indexed again
+        there (:class:`cvpipe.logo.Gallery`).
 
     Returns
     -------
@@ -137,9 +141,9 @@ def recognize_scene(item: tuple, shared: tuple) -> tuple[dict, list, list]:
     scene, gray, error = item
     if error is not None:
         raise error
-    g, method, max_features, min_long_side, mp, vp, seed = shared
-    det = logo.recognize(g, detect(gray, method, max_features, min_long_side=min_long_side),
-                          (gray.shape[1], gray.shape[0]), mp, vp, seed)
+    galleries, max_features, min_long_side, mp, vp, seed = shared
+    scenes = {d: detect(gray, d, max_features, min_long_side=min_long_side) for d in galleries}
+    det = logo.recognize_fused(galleries, scenes, (gray.shape[1], gray.shape[0]), mp, vp, seed)
     found = logo.every_logo(det, vp.score_threshold)
     return (detection_json(scene, det, found), [h.quad for h in found],
             [f"{h.brand} ({h.score:.0f})" for h in found])
@@ -163,7 +167,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scenes", nargs="+", metavar="SCENE", help="scene photos")
     parser.add_argument("--gallery", required=True, metavar="DIR",
                         help="reference logos: DIR/<brand>.<ext> or DIR/<brand>/*.<ext>")
-    add_feature_arguments(parser, fp.detector, fp.max_features, mp.ratio, flag="--method")
+    add_feature_arguments(parser, fp.detector, fp.max_features, mp.ratio, flag="--method", choices=METHODS)
     parser.add_argument("--min-long-side", type=param_type(type(fp), "scene_min_long_side"),
                         default=fp.scene_min_long_side,
                         help=f"enlarge smaller scene photos to this long side before detection, 0 = never "
@@ -193,13 +197,15 @@ def run(args: argparse.Namespace) -> int:
     pictures = overlay_paths(args.scenes, args.overlay, SUFFIX)
     io.check_distinct_outputs([("`--overlay`", p) for p in pictures],
                               [(f"SCENE {k + 1}", path) for k, path in enumerate(args.scenes)])
-    with step(f"gallery ({args.method})"):
-        # indexed before any scene runs, so that a gallery error is one line of its own
-        refs, blank = gallery_references(args.gallery, args.method, args.max_features)
-        g = logo.build_gallery(refs, mp.min_features, mp.reference_features)
-    note_unused(refs, g, blank, mp.min_features)
+    galleries = {}
+    for d in logo.method_detectors(args.method):
+        with step(f"gallery ({d})"):
+            # indexed before any scene runs, so that a gallery error is one line of its own
+            refs, blank = gallery_references(args.gallery, d, args.max_features)
+            galleries[d] = logo.build_gallery(refs, mp.min_features, mp.reference_features)
+        note_unused(refs, galleries[d], blank, mp.min_features)
     records, failed = [], 0
-    shared = (g, args.method, args.max_features, args.min_long_side, mp, vp, args.seed)
+    shared = (galleries, args.max_features, args.min_long_side, mp, vp, args.seed)
     scenes = read_images(args.scenes, "gray", named=True)
     items = map_items(recognize_scene, scenes, shared=shared, scheduler=scheduler,
                       total=len(args.scenes))

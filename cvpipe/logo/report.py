@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Sequence
+from typing import TYPE_CHECKING, Mapping, Sequence
 
 import cv2
 import numpy as np
@@ -158,7 +158,7 @@ NO_TRUTH = "no ground truth"
 
 
 def scene_record(scene: str, det: Detection, reference: str | None, truth: tuple[str | None, np.ndarray | None]
-                 | None = None) -> dict:
+                 | None = None, reference_names: Mapping[str, Sequence[str]] | None = None) -> dict:
     """The JSON record of one scene's decision as the ``logo_verify`` stage stores it.
 
     Parameters
@@ -171,13 +171,17 @@ def scene_record(scene: str, det: Detection, reference: str | None, truth: tuple
         Name of the reference image of ``det.best`` (None when no hypothesis was plausible).
     truth : (brand, quad) or None
         The scene's ground truth (brand None = no gallery logo, quad (4, 2) or None); None when it has none.
+    reference_names : mapping detector -> sequence of str, optional
+        The reference names of each gallery the hypotheses come from; with them a labelled scene whose true brand
+        was missed gets ``missed``: why the true brand's best hypothesis was not the answer.
 
     Returns
     -------
     dict
         ``scene``, ``brand`` (after the threshold), ``score`` (of the best plausible hypothesis, None when there is
         none), ``inliers``, ``quad``, ``best_brand`` (before the threshold), ``reference``, ``labelled`` and, for a
-        labelled scene, ``truth``, ``truth_quad`` and ``quad_error_px`` (when the brand is right).
+        labelled scene, ``truth``, ``truth_quad`` and ``quad_error_px`` (when the brand is right), and ``missed``
+        (see :func:`missed_record`) when the true brand was not the answer.
     """
     best = det.best
     rec = {"scene": scene, "brand": det.brand, "inliers": int(det.inliers),
@@ -190,7 +194,57 @@ def scene_record(scene: str, det: Detection, reference: str | None, truth: tuple
         rec.update(truth=brand, truth_quad=None if quad is None else np.asarray(quad, np.float64).tolist(),
                    quad_error_px=(quad_error(det.quad, quad, cyclic=True)
                                   if det.brand is not None and det.brand == brand else None))
+        if brand is not None and det.brand != brand and reference_names is not None:
+            rec["missed"] = missed_record(det, brand, reference_names)
     return rec
+
+
+def missed_record(det: Detection, brand: str, reference_names: Mapping[str, Sequence[str]]) -> dict | None:
+    """Why ``brand`` was not the answer of a scene: its best hypothesis (plausible ones first, then by score and
+    inliers) with ``reference``, ``detector``, ``matches``, ``inliers``, ``score`` (None when rejected), ``reason``
+    (the failed check, or "below the threshold" / "a better brand won") and ``quad`` (None when the fit had none);
+    None when no reference of the brand had enough matches to be tried."""
+    mine = [h for h in det.hypotheses if h.brand == brand]
+    if not mine:
+        return None
+    h = max(mine, key=lambda h: (h.plausible, h.score, h.inliers, h.matches))
+    reason = h.reason or ("a better brand won" if det.brand is not None else "below the threshold")
+    return {"reference": reference_names[h.detector][h.reference], "detector": h.detector, "matches": int(h.matches),
+            "inliers": int(h.inliers), "score": float(h.score) if np.isfinite(h.score) else None, "reason": reason,
+            "quad": None if h.quad is None else np.asarray(h.quad, np.float64).round(2).tolist()}
+
+
+def draw_missed(scenes: Sequence[np.ndarray], records: Sequence[dict], height: int = 200,
+                per_row: int = 4) -> np.ndarray:
+    """A strip of missed scenes: each scene scaled to ``height`` px with the true outline in blue and the outline of
+    the true brand's best rejected hypothesis in red (``record["missed"]["quad"]``), captioned with the scene, the
+    true brand and why it was missed. BGR uint8 in, BGR uint8 out; ``per_row`` thumbnails a row."""
+    tiles = []
+    width = 0
+    for img, r in zip(scenes, records):
+        img = to_bgr(img)
+        s = height / img.shape[0]
+        tile = cv2.resize(img, (max(1, int(round(img.shape[1] * s))), height), interpolation=cv2.INTER_AREA)
+        m = r.get("missed")
+        for q, color in ((r.get("truth_quad"), (255, 80, 0)), (m and m.get("quad"), (0, 0, 230))):
+            if q is not None:
+                cv2.polylines(tile, [np.round(np.asarray(q, np.float64) * s).astype(np.int32)], True, color, 2,
+                              cv2.LINE_AA)
+        lines = [f"{r['scene']}: {r.get('truth')} -> {r.get('brand') or 'none'}"]
+        lines.append("no reference matched" if m is None else
+                     f"{m['detector']} {m['inliers']}/{m['matches']}: {m['reason']}"[:48])
+        cap = np.full((36, tile.shape[1], 3), 255, np.uint8)
+        for k, text in enumerate(lines):
+            cv2.putText(cap, text, (3, 14 + 16 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.38, (0, 0, 0), 1, cv2.LINE_AA)
+        tiles.append(np.vstack([tile, cap]))
+        width = max(width, tile.shape[1])
+    rows = []
+    for i in range(0, len(tiles), per_row):
+        row = [np.pad(t, ((0, 0), (0, width - t.shape[1] + 4), (0, 0)), constant_values=255)
+               for t in tiles[i:i + per_row]]
+        row += [np.full_like(row[0], 255)] * (per_row - len(row))
+        rows.append(np.hstack(row))
+    return np.vstack(rows) if rows else np.full((height, height, 3), 255, np.uint8)
 
 
 def evaluate_records(records: Sequence[dict], threshold: float) -> dict | None:
@@ -205,6 +259,25 @@ def evaluate_records(records: Sequence[dict], threshold: float) -> dict | None:
     if errs:
         ev["quad_error_px_median"] = float(np.median(errs))
     return ev
+
+
+def brand_recall(records: Sequence[dict]) -> dict[str, tuple[int, int]]:
+    """``brand -> (found, scenes)`` over the labelled scene records (:func:`scene_record`) whose true brand is that
+    brand: how many got it as their answer.
+
+    Examples
+    --------
+    >>> recs = [{"labelled": True, "truth": "a", "brand": "a"}, {"labelled": True, "truth": "a", "brand": None},
+    ...         {"labelled": True, "truth": None, "brand": "b"}, {"labelled": False, "brand": "a"}]
+    >>> brand_recall(recs)
+    {'a': (1, 2)}
+    """
+    out: dict[str, tuple[int, int]] = {}
+    for r in records:
+        if r.get("labelled") and r.get("truth") is not None:
+            found, n = out.get(r["truth"], (0, 0))
+            out[r["truth"]] = (found + (r["brand"] == r["truth"]), n + 1)
+    return dict(sorted(out.items()))
 
 
 def metric_key(name: str) -> str:
@@ -311,12 +384,18 @@ def report_summary(decisions: dict[str, Sequence[dict]], brands: Sequence[str], 
                     [r["brand"] or "none", None if r["score"] is None else round(r["score"], 2), r["inliers"]])
         scene_rows.append(row)
     counts = {m: found_counts(decisions[m], brands) for m in methods}
+    recall = {m: brand_recall(decisions[m]) for m in methods}
+    truth_brands = sorted({b for m in methods for b in recall[m]})
     tables = [
         {"title": "Per detector",
          "columns": ["detector", "scenes", "brand found", "accuracy", "precision", "recall",
                      "outline error median (px)"], "rows": rows},
         {"title": "Found per brand (scenes answered with it)", "columns": ["brand", *methods],
          "rows": [[b, *(counts[m][b] for m in methods)] for b in brands]},
+        *([{"title": "Recall per brand (scenes with ground truth whose brand was found, of those with it)",
+            "columns": ["brand", *methods],
+            "rows": [[b, *(f"{recall[m][b][0]} / {recall[m][b][1]}" if b in recall[m] else "-" for m in methods)]
+                     for b in truth_brands]}] if truth_brands else []),
         {"title": "Per scene: brand found, score (-log10 NFA) and inliers per detector",
          "columns": ["scene", "true brand", *(f"{m} {c}" for m in methods for c in ("brand", "score", "inliers"))],
          "rows": scene_rows},

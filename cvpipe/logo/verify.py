@@ -57,6 +57,8 @@ class Hypothesis:
         Why the hypothesis was rejected, empty when it passed every check.
     reference_xy : (K, 2) float64
         The inliers' reference keypoints in the pixels of ``reference``.
+    detector : str
+        Detector of the gallery the hypothesis comes from (the fused method weighs several).
     """
 
     brand: str
@@ -69,6 +71,7 @@ class Hypothesis:
     pairs: np.ndarray
     reason: str = ""
     reference_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    detector: str = ""
 
     @property
     def plausible(self) -> bool:
@@ -302,7 +305,7 @@ def significance(inliers: int, matches: int, threshold: float, area: float, n_re
 
 def _check(brand: str, r: int, ref: Reference, H: np.ndarray, inl: np.ndarray, src: np.ndarray, dst: np.ndarray,
            g_idx: np.ndarray, s_idx: np.ndarray, scene_size: tuple[int, int], n_tested: int,
-           p: LogoVerifyParams, pose_prob: float = 1.0) -> Hypothesis:
+           p: LogoVerifyParams, pose_prob: float = 1.0, detector: str = "") -> Hypothesis:
     """Plausibility checks and score of one fitted model (see :func:`verify`)."""
     # one inlier per scene keypoint: with `per_reference` > 1 a scene keypoint may match both twins of a symmetric
     # mark, and both may agree with the model
@@ -325,7 +328,7 @@ def _check(brand: str, r: int, ref: Reference, H: np.ndarray, inl: np.ndarray, s
     if not reason:
         area = float(scene_size[0] * scene_size[1])
         score = significance(n_in, n_matches, p.ransac_threshold, area, n_tested, pose_prob)
-    return Hypothesis(brand, r, n_matches, n_in, score, H, quad, pairs, reason, src[keep])
+    return Hypothesis(brand, r, n_matches, n_in, score, H, quad, pairs, reason, src[keep], detector)
 
 
 def _reprojection_inliers(H: np.ndarray, src: np.ndarray, dst: np.ndarray, threshold: float,
@@ -381,8 +384,20 @@ def _fit_affine_homography(src: np.ndarray, dst: np.ndarray, ref: Reference, sce
 MODELS = {"homography": _fit_homography, "affine_homography": _fit_affine_homography}
 
 
+def _scene_counts(matches: Matches) -> dict[int, int]:
+    """Reference index -> distinct scene keypoints matched to it (one matched to several keypoints counts once)."""
+    return {int(r): len(np.unique(matches.scene_idx[matches.ref == r])) for r in np.unique(matches.ref)}
+
+
+def tested_references(matches: Matches, params: LogoVerifyParams | None = None) -> int:
+    """References that :func:`verify` tests in a scene: those with at least ``min_matches`` matched scene
+    keypoints."""
+    p = params or LogoVerifyParams()
+    return sum(c >= p.min_matches for c in _scene_counts(matches).values())
+
+
 def verify(gallery: Gallery, matches: Matches, scene: Features | np.ndarray, scene_size: tuple[int, int],
-           params: LogoVerifyParams | None = None, rng=None) -> list[Hypothesis]:
+           params: LogoVerifyParams | None = None, rng=None, tests: int | None = None) -> list[Hypothesis]:
     """Fit and check one model per gallery reference that has at least ``min_matches`` tentatively matched scene
     keypoints.
 
@@ -407,6 +422,9 @@ def verify(gallery: Gallery, matches: Matches, scene: Features | np.ndarray, sce
     params : LogoVerifyParams, optional
     rng : None, int or Generator
         Seeds RANSAC.
+    tests : int, optional
+        References tested in this scene by every method weighed in one decision (:func:`tested_references` of each
+        gallery, summed: the fused method); the score's multiple-test count. Default: this gallery's alone.
 
     Returns
     -------
@@ -420,10 +438,12 @@ def verify(gallery: Gallery, matches: Matches, scene: Features | np.ndarray, sce
     scene_pose = (np.c_[scene.angle, np.log(np.maximum(scene.size, 1e-6))].astype(np.float64) if use_pose
                   else None)
     pose_prob = pose_probability(p.angle_tolerance, p.scale_tolerance) if use_pose else 1.0
-    refs = np.unique(matches.ref)
-    # a scene keypoint matched to several keypoints of one reference counts once
-    counts = {int(r): len(np.unique(matches.scene_idx[matches.ref == r])) for r in refs}
-    tested = [int(r) for r in refs if counts[int(r)] >= p.min_matches]
+    counts = _scene_counts(matches)
+    tested = [r for r, c in counts.items() if c >= p.min_matches]
+    if tests is None:
+        tests = len(tested)
+    elif tests < len(tested):
+        raise ValueError(f"`tests` must count at least the {len(tested)} references tested here, got {tests}")
     fitter = MODELS[p.binary_model if gallery.binary else p.model]
     out = []
     for r in tested:
@@ -450,12 +470,12 @@ def verify(gallery: Gallery, matches: Matches, scene: Features | np.ndarray, sce
             except EstimationError as exc:
                 if hyp is None:
                     hyp = Hypothesis(brand, r, counts[r], 0, -np.inf, None, None, none, f"no homography: {exc}",
-                                     np.zeros((0, 2)))
+                                     np.zeros((0, 2)), gallery.detector)
                 break
             inl = np.zeros(len(src), bool)
             inl[np.flatnonzero(left)[fit_inl]] = True
             cand = _check(brand, r, ref, H, inl, src, dst, g_idx, s_idx, scene_size,
-                          len(tested) * attempt, p, pose_prob)
+                          tests * attempt, p, pose_prob, gallery.detector)
             if hyp is None or (hyp.reason and not cand.reason):
                 hyp = cand
             if not cand.reason:
