@@ -325,7 +325,9 @@ def build_html(
         if task in present:
             body += _section(present[task], base, sizes or {})
     body += ["<footer>Written by the <code>report</code> stage (<code>dvc repro report</code>) from "
-             "<code>outputs/&lt;task&gt;/summary.json</code>; curves and bars: <code>dvc plots show</code>.</footer>",
+             "<code>outputs/&lt;task&gt;/summary.json</code>; curves and bars: <code>dvc plots show</code>. These "
+             "pictures next to an experiment's: <code>dvc plots diff main &lt;experiment&gt;</code> (an offline "
+             "page, one column per revision).</footer>",
              "</main>"]
     head = ['<!DOCTYPE html>', '<html lang="en">', "<head>", '<meta charset="utf-8">',
             '<meta name="viewport" content="width=device-width, initial-scale=1">',

@@ -107,19 +107,28 @@ def test_init_repro_sweep_and_pull_in_a_users_repository(user):
         time.sleep(3)
     assert status.count("Success") == 2, status
     shown = json.loads(_run(["dvc", "exp", "show", "--json"], repo, env).stdout)
-    found = {}
+    found, names = {}, {}
     for rev in shown:
         for exp in (rev.get("experiments") or []):
             for run in exp.get("revs", []):
                 data = run["data"]
                 t = data["params"]["params.yaml"]["data"]["hough"]["lines"]["threshold"]
                 found[t] = data["metrics"]["outputs/hough/metrics.json"]["data"]["hough"]["all"]["lines_ours"]
+                names[t] = run["name"]
     assert set(found) == {60, 100} and found[60] > found[100] > 0  # a lower threshold finds more lines
 
     table = _run(["dvc", "exp", "show", "--only-changed", "--drop", DROP], repo, env).stdout
     assert "hough.lines.threshold" in table and _width(table) <= MAX_COLUMNS, table
     metrics_table = _run(["dvc", "metrics", "show"], repo, env).stdout
     assert "lines_ours" in metrics_table and _width(metrics_table) <= MAX_COLUMNS, metrics_table
+
+    # the two experiments' pictures side by side, on a page that loads nothing from the network
+    _run(["dvc", "plots", "diff", names[60], names[100], "-o", "plots"], repo, env)
+    page = (repo / "plots" / "index.html").read_text(encoding="utf-8")
+    assert not re.search(r"""(src|href)\s*=\s*["']?https?:""", page), "the page loads something from the network"
+    for name in (names[60], names[100]):
+        pictures = [m for m in re.findall(r'<img src="([^"]+)"', page) if name in m]
+        assert pictures and all((repo / "plots" / p).is_file() for p in pictures), name
 
     # a folder that neither git nor DVC tracks is not in an experiment's copy: one line says how to fix it
     _lines_images(repo / "data" / "untracked", n=1)
