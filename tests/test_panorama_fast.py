@@ -3,6 +3,8 @@ synthetic views with known homographies; the both-axes error measure of the benc
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -108,3 +110,30 @@ def test_fast_preset_drops_an_unrelated_photo(views):
     pano = panorama.stitch([*imgs, fit(photo("coffee"), *VIEW)], **panorama.preset_sections("fast"), rng=0)
     assert pano.registration.used == (0, 1, 2)
     assert [k for k, _ in pano.registration.dropped] == [3]
+
+
+def test_stitch_cli_preset_and_overrides(tmp_path, views, monkeypatch, capsys):
+    import cv2
+
+    from cvpipe import cli
+    from cvpipe.commands import stitch as command
+
+    imgs, _ = views
+    paths = []
+    for k in range(3):
+        p = tmp_path / f"v{k}.png"
+        cv2.imwrite(str(p), imgs[k])
+        paths.append(str(p))
+    seen = []
+    real = panorama.stitch
+    monkeypatch.setattr(panorama, "stitch", lambda images, **kw: seen.append(kw) or real(images, **kw))
+    out = str(tmp_path / "pano.png")
+    assert cli.main(["stitch", *paths, "-o", out, "--preset", "fast", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["used"] == paths
+    assert (seen[-1]["features"].detector, seen[-1]["matching"].pair_refine) == ("orb", "lk")
+    # a flag given with the preset wins over it, the preset's other fields stay
+    assert cli.main(["stitch", *paths, "-o", out, "--preset", "fast", "--detector", "sift", "--json"]) == 0
+    capsys.readouterr()
+    assert (seen[-1]["features"].detector, seen[-1]["features"].max_features,
+            seen[-1]["matching"].pair_refine) == ("sift", 1500, "lk")
+    assert command.PRESET_CHOICES == panorama.PRESET_CHOICES
