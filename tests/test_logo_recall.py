@@ -189,3 +189,67 @@ def test_fused_finds_the_mark_where_it_is(fused_case):
 def test_unknown_method_lists_the_choices():
     with pytest.raises(ValueError, match=r"`method` must be one of \['akaze', 'brisk', 'fused', 'orb', 'sift'\]"):
         logo.method_detectors("surf")
+
+
+def test_missed_record_names_the_true_brands_best_rejected_fit():
+    sq = np.array([[0, 0], [100, 0], [100, 100], [0, 100]], float)
+    none = np.zeros((0, 2), np.int64)
+    hyps = [logo.Hypothesis("a", 0, 30, 20, 12.0, np.eye(3), sq, none, "", detector="sift"),
+            logo.Hypothesis("b", 1, 18, 3, -np.inf, np.eye(3), sq, none, "3 inliers < 5", detector="orb"),
+            logo.Hypothesis("b", 2, 9, 6, -np.inf, np.eye(3), sq + 5, none, "anisotropy 7.0 > 6.0",
+                            detector="akaze")]
+    det = logo.decide(hyps)
+    rec = logo.missed_record(det, "b", {"sift": ["s0"], "orb": ["o0", "o1"], "akaze": ["k0", "k1", "k2"]})
+    # neither is plausible: the one with more inliers is the better rejected fit
+    assert (rec["reference"], rec["detector"], rec["inliers"], rec["reason"]) == ("k2", "akaze", 6,
+                                                                                  "anisotropy 7.0 > 6.0")
+    assert logo.missed_record(det, "c", {}) is None  # no reference of the brand was tried
+    strip = logo.draw_missed([np.zeros((120, 160), np.uint8)] * 5,
+                             [{"scene": f"s{i}", "truth": "b", "brand": "a", "missed": rec} for i in range(5)],
+                             height=100, per_row=4)
+    assert strip.ndim == 3 and strip.shape[0] == 2 * (100 + 36)  # two rows of thumbnails with their captions
+
+
+ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
+
+
+def _stage(module: str, cwd, *args: str):
+    import os
+    import subprocess
+    import sys
+
+    from conftest import default_params_path
+
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    p = subprocess.run([sys.executable, "-m", f"stages.{module}", *args, "--params", str(default_params_path())],
+                       cwd=cwd, env=env, capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    return p
+
+
+@pytest.mark.slow
+def test_verify_stage_runs_the_fused_method(tmp_path, fused_case):
+    import json
+
+    _, scene, H = fused_case
+    d = tmp_path / "mine"
+    (d / "gallery").mkdir(parents=True)
+    (d / "scenes").mkdir()
+    for i in range(3):
+        cv2.imwrite(str(d / "gallery" / f"brand{i}.png"), _card(10 + i))
+    cv2.imwrite(str(d / "scenes" / "shop.png"), scene)
+    cv2.imwrite(str(d / "scenes" / "empty.png"), np.full((480, 640), 128, np.uint8))
+    for det in logo.method_detectors("fused"):
+        _stage("features", tmp_path, "--images", "mine", "--out", f"features/{det}", "--section", "logo.features",
+               "--detector", det, "--scenes", "scenes")
+        _stage("logo_match", tmp_path, "--images", "mine", "--features", f"features/{det}", "--detector", det,
+               "--out", f"matches/{det}")
+    _stage("logo_verify", tmp_path, "--images", "mine", "--features", "features", "--matches", "matches",
+           "--detector", "fused", "--out", "verify/fused", "--metrics", "metrics_fused.json", "--pr", "pr.json")
+    recs = {r["scene"]: r for r in json.loads((tmp_path / "verify/fused/decisions.json").read_text())["scenes"]}
+    assert recs["shop"]["brand"] == "brand1" and recs["empty"]["brand"] is None
+    assert recs["shop"]["reference"] == "gallery/brand1.png"
+    _stage("logo_report", tmp_path, "--images", "mine", "--verify", "verify", "--methods", "fused",
+           "--out", "report", "--summary", "summary.json", "--found", "found.json")
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["tables"][0]["rows"][0][:3] == ["fused", 2, 1]
