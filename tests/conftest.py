@@ -6,6 +6,7 @@ from __future__ import annotations
 # a result computed in a test's own process is the same, bit for bit, as the one a stage wrote
 import stages  # noqa: F401,I001
 
+import functools
 import os
 from pathlib import Path
 
@@ -14,6 +15,21 @@ import pytest
 from hypothesis import settings
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+@functools.lru_cache(maxsize=None)
+def default_params_path() -> Path:
+    """A params.yaml with every parameter at its default, for tests that run stages: this repository's params.yaml
+    is the workspace's, and after a user's `dvc exp apply` it holds their values."""
+    import tempfile
+
+    import yaml
+
+    from cvpipe.init import default_params
+
+    path = Path(tempfile.mkdtemp(prefix="cvpipe-defaults-")) / "params.yaml"
+    path.write_text(yaml.safe_dump(default_params(), sort_keys=False), encoding="utf-8")
+    return path
 
 # the property tests draw the same examples on every run (a fixed seed), so that CI sees what a developer saw;
 # HYPOTHESIS_PROFILE=explore draws fresh random examples each run (to hunt for new failing inputs)

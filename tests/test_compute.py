@@ -22,6 +22,7 @@ from cvpipe.params import ComputeParams, from_mapping
 
 from test_defects import board, make_probe, motion
 from test_logos import PERSP, _scene, _view, gallery, gallery_dir, marks  # noqa: F401 - fixtures used below
+from conftest import default_params_path
 
 pytestmark = pytest.mark.timeout(600)  # a cluster run that stalls fails here, not after the suite-wide 1500 s
 
@@ -486,7 +487,7 @@ def test_defect_register_stage_identical_serial_local_external(tmp_path, repo_ro
                       make_probe(part, motion(1.5 * k - 3, 1.0 + 0.01 * k, (4.0 - k, 2.0 * k - 5)), seed=k))
     io.save_image(folder / "probes" / "blank.png", np.full(ref.shape, 90, np.uint8))  # cannot be registered
     env = dict(os.environ, PYTHONPATH=str(repo_root))
-    base = yaml.safe_load((repo_root / "params.yaml").read_text())
+    base = yaml.safe_load(default_params_path().read_text())
 
     def stage(module: str, *args, compute: dict | None = None, cwd=tmp_path) -> subprocess.CompletedProcess:
         params = dict(base)
@@ -633,7 +634,7 @@ def sample_pipeline(tmp_path_factory, repo_root):
     import yaml
 
     root = tmp_path_factory.mktemp("pipeline")
-    params = yaml.safe_load((repo_root / "params.yaml").read_text())
+    params = yaml.safe_load(default_params_path().read_text())
     params.pop("compute", None)  # in process unless CVPIPE_COMPUTE_SCHEDULER says otherwise
     params["samples"].update(logo_scenes=3, logo_negatives=1)  # the few scenes the test needs
     (root / "params.yaml").write_text(yaml.safe_dump(params))

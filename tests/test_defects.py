@@ -13,6 +13,7 @@ from cvpipe import cli, defect, io
 from cvpipe.errors import EstimationError, InputError
 from cvpipe.metrics import DetectionCounts, box_iou, corner_error, match_boxes
 from cvpipe.params import DefectDiffParams, DefectRegionParams, DefectRegisterParams, replace
+from conftest import default_params_path
 
 SIZE = 320
 
@@ -436,9 +437,9 @@ def test_stages_give_inspect_results_drop_the_unregistrable_probe_and_rerun_iden
     io.save_json(folder / "truth.json", {"probes": [
         {"file": "faulty.png", "verdict": "faulty", "boxes": true_box, "H": H_faulty},
         {"file": "perfect.png", "verdict": "perfect", "boxes": [], "H": H_perfect}]})  # blank.png: no truth
-    o = _run_stages(root, folder, tmp_path, root / "params.yaml")
+    o = _run_stages(root, folder, tmp_path, default_params_path())
 
-    params = defect.load_inspect_params(root / "params.yaml")
+    params = defect.load_inspect_params(default_params_path())
     records = {r["probe"]: r for r in json.loads((o / "results.json").read_text())}
     for name in ("faulty.png", "perfect.png"):  # the stage chain is inspect(), step by step
         # read as the stages read them (the decoder's grey conversion can differ from cv2.cvtColor by 1 level)

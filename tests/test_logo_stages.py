@@ -17,6 +17,7 @@ from cvpipe import logo
 from cvpipe.geometry import apply_homography, image_corners
 
 from test_logos import PERSP, _region_error, _scene, _view, marks  # noqa: F401 - fixtures used below
+from conftest import default_params_path
 
 
 # ----------------------------------------------------------------------------------- the DVC stages (runner)
@@ -27,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def _stage(module: str, cwd: Path, *args: str) -> subprocess.CompletedProcess:
     """Run ``python -m stages.<module>`` as DVC would (this checkout first on the path), in ``cwd``."""
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
-    return subprocess.run([sys.executable, "-m", f"stages.{module}", *args, "--params", str(ROOT / "params.yaml")],
+    return subprocess.run([sys.executable, "-m", f"stages.{module}", *args, "--params", str(default_params_path())],
                           cwd=cwd, env=env, capture_output=True, text=True)
 
 

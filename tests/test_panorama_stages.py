@@ -7,10 +7,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from cvpipe.errors import InputError
 
 from test_panorama import distractor, views  # noqa: F401 - fixtures used below
+from conftest import default_params_path
 
 
 # ---- the DVC stages (stages/panorama_*.py) on a user-style folder: truth optional, nothing skipped silently ----
@@ -53,7 +55,7 @@ def test_stages_on_a_folder_with_partial_truth(tmp_path, views, distractor, monk
     io.save_json(data / "truth.json", {"sets": [{"name": "room", "images": [f"room/view_{k}.png" for k in range(3)],
                                                  "H": [T[0] @ np.linalg.inv(T[k]) for k in range(3)]}]})
     monkeypatch.chdir(tmp_path)  # the runner writes its timings to ./outputs/timings
-    params = repo_root / "params.yaml"
+    params = default_params_path()
     _run_stage("panorama_features", monkeypatch, images=data, out=out / "features", params=params)
     _run_stage("panorama_match", monkeypatch, features=out / "features", out=out / "matches", params=params)
     _run_stage("panorama_homographies", monkeypatch, matches=out / "matches", out=out / "homographies",
@@ -63,7 +65,9 @@ def test_stages_on_a_folder_with_partial_truth(tmp_path, views, distractor, monk
     _run_stage("panorama_blend", monkeypatch, warp=out / "warp", out=out / "blend", params=params)
     # a block compensator: its record shows each image's mean gain per channel
     blocks = tmp_path / "params_blocks.yaml"
-    blocks.write_text(params.read_text().replace("gain_compensation: gain ", "gain_compensation: channel_blocks "))
+    values = yaml.safe_load(params.read_text())
+    values["panorama"]["blend"]["gain_compensation"] = "channel_blocks"
+    blocks.write_text(yaml.safe_dump(values))
     _run_stage("panorama_blend", monkeypatch, warp=out / "warp", out=out / "blend_blocks", params=blocks)
     gains = np.array(io.load_json(out / "blend_blocks" / "room.json")["gains"])
     assert gains.shape == (3, 3) and np.all(np.abs(gains - 1) < 0.3)
