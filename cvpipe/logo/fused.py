@@ -53,7 +53,9 @@ def verify_fused(galleries: Mapping[str, Gallery], matches: Mapping[str, Matches
         Scene size in pixels.
     params : LogoVerifyParams, optional
     rng : None, int or Generator
-        Seeds RANSAC (one generator, used by the detectors in the order of ``galleries``).
+        Seeds RANSAC. A seed (or None) starts every detector's RANSAC from it alike, so that a detector's
+        hypotheses here are those it finds alone (:func:`cvpipe.logo.verify` with the same seed); a Generator is
+        drawn from by the detectors in the order of ``galleries``.
 
     Returns
     -------
@@ -64,11 +66,13 @@ def verify_fused(galleries: Mapping[str, Gallery], matches: Mapping[str, Matches
         raise ValueError(f"`galleries`, `matches` and `scenes` must have the same detectors, got "
                          f"{sorted(galleries)}, {sorted(matches)}, {sorted(scenes)}")
     p = params or LogoVerifyParams()
-    rng = np.random.default_rng(rng)
     tests = sum(tested_references(matches[d], p) for d in galleries)
     out: list[Hypothesis] = []
     for d, g in galleries.items():
-        out += verify(g, matches[d], scenes[d], scene_size, p, rng, tests=tests)
+        # RANSAC finds a marginal fit (5-8 inliers) or not depending on its samples: each detector draws them as it
+        # would alone, so that the fused decision only re-weighs the single detectors' hypotheses
+        out += verify(g, matches[d], scenes[d], scene_size, p,
+                      rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng), tests=tests)
     out.sort(key=lambda h: (h.score, h.inliers), reverse=True)
     return out
 
