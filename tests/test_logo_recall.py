@@ -255,3 +255,15 @@ def test_verify_stage_runs_the_fused_method(tmp_path, fused_case):
            "--out", "report", "--summary", "summary.json", "--found", "found.json")
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["tables"][0]["rows"][0][:3] == ["fused", 2, 1]
+
+
+def test_bench_per_brand_counts_the_answer_at_the_threshold(capsys):
+    from cvpipe.bench.logo import _print_per_brand, per_brand
+
+    answers = [{"truth": "a", "best_brand": "a", "score": 3.0}, {"truth": "a", "best_brand": "a", "score": -1.0},
+               {"truth": "b", "best_brand": "a", "score": 9.0}, {"truth": None, "best_brand": "b", "score": 9.0}]
+    got = per_brand(answers, 0.0)
+    # the second "a" is below the threshold; the unknown-brand scene counts for no brand
+    assert got == {"a": {"scenes": 2, "found": 1, "recall": 0.5}, "b": {"scenes": 1, "found": 0, "recall": 0.0}}
+    _print_per_brand({"methods": {"fused": {"per_brand": got}}})
+    assert "fused    a 1/2, b 0/1" in capsys.readouterr().out

@@ -342,6 +342,12 @@ def _extra_count(extra: dict[str, set[str]]) -> int:
     return sum(len(v) for v in extra.values())
 
 
+def _print_per_brand(res: dict) -> None:
+    print("recall per brand (found / scenes labelled with it):")
+    for m, ev in res["methods"].items():
+        print(f"{m:8s} " + ", ".join(f"{b} {v['found']}/{v['scenes']}" for b, v in ev["per_brand"].items()))
+
+
 def _print_several(res: dict) -> None:
     pr = res["protocol"]
     print(f"several brands per photo (labels plus {pr['extra_labels']} documented corrections, "
@@ -391,6 +397,7 @@ def run(args: argparse.Namespace) -> int:
         for m, ev in res["methods"].items():
             print(f"{m:8s} {ev['precision']:9.3f} {ev['recall']:7.3f} {ev['accuracy']:8.3f} "
                   f"{ev['best_recall_at_precision_0.95']:9.3f}")
+        _print_per_brand(res)
         _print_several(res)
         return 0
     res = run_benchmark(root, args.methods, fp, mp, vp, args.min_box, args.seed, args.scene_scale, args.extra_score)
@@ -408,5 +415,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"{m:8s} {ev['precision']:9.3f} {ev['recall']:7.3f} {ev['accuracy']:8.3f} "
               f"{'-' if p70 is None else f'{p70:.3f}':>9s} {ev['best_recall_at_precision_0.95']:9.3f} "
               f"{ev['time_per_scene_median_s']:8.3f}")
+    _print_per_brand(res)
     _print_several(res)
     return 0
