@@ -241,6 +241,9 @@ def test_verify_stage_runs_the_fused_method(tmp_path, fused_case):
         cv2.imwrite(str(d / "gallery" / f"brand{i}.png"), _card(10 + i))
     cv2.imwrite(str(d / "scenes" / "shop.png"), scene)
     cv2.imwrite(str(d / "scenes" / "empty.png"), np.full((480, 640), 128, np.uint8))
+    # labelled as showing brand2, which it does not: a missed scene for the report's strip
+    (d / "truth.json").write_text(json.dumps({"scenes": [{"file": "shop.png", "brand": "brand1", "quad": None},
+                                                         {"file": "empty.png", "brand": "brand2", "quad": None}]}))
     for det in logo.method_detectors("fused"):
         _stage("features", tmp_path, "--images", "mine", "--out", f"features/{det}", "--section", "logo.features",
                "--detector", det, "--scenes", "scenes")
@@ -255,6 +258,9 @@ def test_verify_stage_runs_the_fused_method(tmp_path, fused_case):
            "--out", "report", "--summary", "summary.json", "--found", "found.json")
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["tables"][0]["rows"][0][:3] == ["fused", 2, 1]
+    tables = {t["title"].split(" (")[0]: t for t in summary["tables"]}
+    assert tables["Recall per brand"]["rows"] == [["brand1", "1 / 1"], ["brand2", "0 / 1"]]
+    assert "missed" in recs["empty"] and (tmp_path / "report" / "missed_fused.png").is_file()
 
 
 def test_bench_per_brand_counts_the_answer_at_the_threshold(capsys):
