@@ -88,7 +88,8 @@ def test_a_code_change_reruns_the_stages_that_run_that_code(reproduced):
 
 
 def test_one_parameter_experiment_reads_in_120_columns(reproduced):
-    # the README's `dvc exp show --only-changed --drop 'outputs/|data/'` after a one-parameter experiment: the
+    # the README's `dvc exp show --only-changed --drop 'outputs/|data/|Created|State|Executor'` after a
+    # one-parameter experiment: the
     # changed parameter and the headline metrics it moved, none cut off (rich marks a cut column with an ellipsis).
     # It runs before the own-images experiments of this module: --only-changed compares every experiment shown
     import subprocess
@@ -99,7 +100,7 @@ def test_one_parameter_experiment_reads_in_120_columns(reproduced):
     try:
         dvc(["exp", "run", "-n", "threshold-140", "-S", "hough.lines.threshold=140"], repo)
         shown = subprocess.run([sys.executable, "-m", "dvc", "exp", "show", "--only-changed", "--drop",
-                                "outputs/|data/", "--no-pager"], cwd=repo, env={**run_env(), "COLUMNS": "120"},
+                                "outputs/|data/|Created|State|Executor", "--no-pager"], cwd=repo, env={**run_env(), "COLUMNS": "120"},
                                capture_output=True, text=True, check=True).stdout
         lines = [ln for ln in shown.splitlines() if ln.strip()]
         assert max(len(ln) for ln in lines) <= 120 and "\u2026" not in shown, shown
