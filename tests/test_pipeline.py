@@ -89,8 +89,8 @@ def test_a_code_change_reruns_the_stages_that_run_that_code(reproduced):
 
 def test_one_parameter_experiment_reads_in_120_columns(reproduced):
     # the README's `dvc exp show --only-changed --drop 'outputs/|data/|Created|State|Executor'` after a
-    # one-parameter experiment: the
-    # changed parameter and the headline metrics it moved, none cut off (rich marks a cut column with an ellipsis).
+    # one-parameter experiment: the changed parameter and the headline metrics it moved, none cut off (rich marks a
+    # cut column with an ellipsis).
     # It runs before the own-images experiments of this module: --only-changed compares every experiment shown
     import subprocess
 
