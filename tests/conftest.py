@@ -61,3 +61,15 @@ def textured_image() -> np.ndarray:
     import cv2
 
     return cv2.cvtColor(fit(photo("astronaut"), 640, 480), cv2.COLOR_BGR2GRAY)
+
+
+
+def pytest_unconfigure(config):
+    """Tests that run a program in this process (a stage's ``run`` as ``python -m`` would) install
+    :mod:`cvpipe.interrupt`, whose last ``atexit`` function leaves with that program's exit status: without this,
+    a session with failures would end with the last such program's 0. pytest's own status must be the process's."""
+    import atexit
+
+    from cvpipe import interrupt
+
+    atexit.unregister(interrupt._leave)  # noqa: SLF001 - our own module's function, not a dependency's
