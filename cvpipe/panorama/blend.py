@@ -259,6 +259,38 @@ def _three(a: np.ndarray) -> np.ndarray:
     return cv2.merge([a, a, a])
 
 
+def _reach_of_own(labels: np.ndarray, k: int, corner: tuple[int, int], shape: tuple[int, int],
+                  box: tuple[int, int, int, int], P: int) -> tuple[int, int, int, int] | None:
+    """The part of image ``k``'s padded box (canvas pixels, multiples of ``P``) that its pyramid needs: the box of
+    the pixels the seams gave it, grown by ``2 * P``, or None when it has none.
+
+    A level-l weight spreads about ``2**(l+1)`` pixels beyond the own pixels, and the Laplacian there reads about as
+    far again: ``2 * P`` (``P = 2**bands``) covers both at the coarsest level, so every value the blend uses is the
+    one the whole box gives (the crop's border reflection stays outside what is read; tested against the whole box).
+    """
+    x, y = corner
+    own = labels[y:y + shape[0], x:x + shape[1]] == k
+    rows, cols = np.flatnonzero(own.any(1)), np.flatnonzero(own.any(0))
+    if len(rows) == 0:
+        return None
+    reach = 2 * P
+    ax0, ay0, ax1, ay1 = box
+    return (max(ax0, (x + cols[0] - reach) // P * P), max(ay0, (y + rows[0] - reach) // P * P),
+            min(ax1, -(-(x + cols[-1] + 1 + reach) // P) * P), min(ay1, -(-(y + rows[-1] + 1 + reach) // P) * P))
+
+
+def _level0_laplacian(norm: np.ndarray, nxt: np.ndarray, sl: tuple[slice, slice]) -> np.ndarray:
+    """``norm - pyrUp(nxt)`` on the region ``sl`` only (the image's pixels in its crop), with one pixel of ``nxt``
+    around it so that the expansion there equals the whole one."""
+    y0, y1, x0, x1 = sl[0].start, sl[0].stop, sl[1].start, sl[1].stop
+    # pyrUp's output pixel 2i or 2i+1 reads input rows i-1..i+1: expand from one input pixel before to one after
+    cy0, cx0 = max(y0 // 2 - 1, 0), max(x0 // 2 - 1, 0)
+    cy1, cx1 = min((y1 + 1) // 2 + 1, nxt.shape[0]), min((x1 + 1) // 2 + 1, nxt.shape[1])
+    up = cv2.pyrUp(np.ascontiguousarray(nxt[cy0:cy1, cx0:cx1]), dstsize=(2 * (cx1 - cx0), 2 * (cy1 - cy0)))
+    up = up[y0 - 2 * cy0:y1 - 2 * cy0, x0 - 2 * cx0:x1 - 2 * cx0]
+    return cv2.subtract(norm[sl], up)
+
+
 def blend_multiband(w: Warped, labels: np.ndarray, bands: int, gains=None) -> np.ndarray:
     """Multi-band (Laplacian pyramid) blending of the seam regions.
 
@@ -294,16 +326,23 @@ def blend_multiband(w: Warped, labels: np.ndarray, bands: int, gains=None) -> np
     acc = [np.zeros(((gy1 - gy0) >> k, (gx1 - gx0) >> k, 3), np.float32) for k in range(bands + 1)]
     # level 0 needs no weight sum: the seam labels give every covered pixel to exactly one image
     wsum = [None] + [np.zeros(((gy1 - gy0) >> k, (gx1 - gx0) >> k), np.float32) for k in range(1, bands + 1)]
-    for k, (img, mask, (x, y), (ax0, ay0, ax1, ay1)) in enumerate(zip(w.images, w.masks, w.corners, boxes)):
-        h, ww = mask.shape
+    for k, (img, mask, (x, y), box) in enumerate(zip(w.images, w.masks, w.corners, boxes)):
+        crop = _reach_of_own(labels, k, (x, y), mask.shape, box, P)
+        if crop is None:  # the seams gave this image no pixel: it adds nothing at any level
+            continue
+        ax0, ay0, ax1, ay1 = crop
+        # the part of the image inside the crop, in the crop's and in the image's pixels
+        ix0, iy0, ix1, iy1 = max(x, ax0), max(y, ay0), min(x + mask.shape[1], ax1), min(y + mask.shape[0], ay1)
+        sl = (slice(iy0 - ay0, iy1 - ay0), slice(ix0 - ax0, ix1 - ax0))
+        isl = (slice(iy0 - y, iy1 - y), slice(ix0 - x, ix1 - x))
         sub = np.zeros((ay1 - ay0, ax1 - ax0, 3), np.float32)
         m = np.zeros((ay1 - ay0, ax1 - ax0), np.float32)
-        sl = (slice(y - ay0, y - ay0 + h), slice(x - ax0, x - ax0 + ww))
-        im = img if img.ndim == 3 else cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+        im = img[isl] if img.ndim == 3 else cv2.cvtColor(img[isl], cv2.COLOR_GRAY2BGR)
+        gain = _gain_of(g, k)
         # warped images are 0 outside their mask, so image * mask is the gained image itself
-        np.multiply(im, _gain_of(g, k), out=sub[sl], casting="unsafe")
-        m[sl] = mask > 0
-        own = labels[y:y + h, x:x + ww] == k
+        np.multiply(im, gain[isl] if gain.ndim == 3 else gain, out=sub[sl], casting="unsafe")
+        m[sl] = mask[isl] > 0
+        own = labels[iy0:iy1, ix0:ix1] == k
         # level 0 copies `own` pixels; only the coarser levels need the float weight, so level 0's is built, shrunk
         # and dropped before the first Laplacian level exists (memory: the full-size box arrays are the peak)
         weight = np.zeros_like(m)
@@ -317,26 +356,27 @@ def blend_multiband(w: Warped, labels: np.ndarray, bands: int, gains=None) -> np
             if lev < bands:
                 gm, gw = cv2.pyrDown(gm), cv2.pyrDown(gw)
                 nxt = cv2.divide(gm, _three(np.maximum(gw, 1e-6)))
-                lap = cv2.pyrUp(nxt, dstsize=(norm.shape[1], norm.shape[0]))
-                cv2.subtract(norm, lap, dst=lap)
-            else:
-                lap = norm
             oy, ox = (ay0 - gy0) >> lev, (ax0 - gx0) >> lev
-            hh, wl = weight.shape
-            if lev == 0:  # hard weights: copy this image's own pixels
+            if lev == 0:  # hard weights: this image's own pixels, whose Laplacian alone is needed
                 dst = acc[0][oy + sl[0].start:oy + sl[0].stop, ox + sl[1].start:ox + sl[1].stop]
-                cv2.copyTo(lap[sl], own.view(np.uint8), dst)
+                cv2.copyTo(_level0_laplacian(norm, nxt, sl), own.view(np.uint8), dst)
             else:
+                if lev < bands:
+                    lap = cv2.pyrUp(nxt, dstsize=(norm.shape[1], norm.shape[0]))
+                    cv2.subtract(norm, lap, dst=lap)
+                else:
+                    lap = norm
+                hh, wl = weight.shape
                 cv2.multiply(lap, _three(weight), dst=lap)
                 dst = acc[lev][oy:oy + hh, ox:ox + wl]
                 cv2.add(dst, lap, dst=dst)
                 dst = wsum[lev][oy:oy + hh, ox:ox + wl]
                 cv2.add(dst, weight, dst=dst)
+                del lap
             if lev < bands:
                 norm = nxt
                 if lev > 0:  # level 0's weight was shrunk before the loop
                     weight = cv2.pyrDown(weight)
-            del lap
         del gm, gw, norm, nxt, own
     out = None
     for lev in range(bands, -1, -1):
