@@ -11,6 +11,8 @@
 
 from __future__ import annotations
 
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
 import cv2
@@ -259,6 +261,11 @@ def _three(a: np.ndarray) -> np.ndarray:
     return cv2.merge([a, a, a])
 
 
+#: images whose multiband pyramids are built at once (:func:`blend_multiband`): the steps are memory-bound, so two
+#: threads keep two cores busy, and the memory rule (the crops in work never exceed the largest box) rarely fits more
+BLEND_THREADS = 2
+
+
 def _reach_of_own(labels: np.ndarray, k: int, corner: tuple[int, int], shape: tuple[int, int],
                   box: tuple[int, int, int, int], P: int) -> tuple[int, int, int, int] | None:
     """The part of image ``k``'s padded box (canvas pixels, multiples of ``P``) that its pyramid needs: the box of
@@ -289,6 +296,58 @@ def _level0_laplacian(norm: np.ndarray, nxt: np.ndarray, sl: tuple[slice, slice]
     up = cv2.pyrUp(np.ascontiguousarray(nxt[cy0:cy1, cx0:cx1]), dstsize=(2 * (cx1 - cx0), 2 * (cy1 - cy0)))
     up = up[y0 - 2 * cy0:y1 - 2 * cy0, x0 - 2 * cx0:x1 - 2 * cx0]
     return cv2.subtract(norm[sl], up)
+
+
+def _image_share(w: Warped, labels: np.ndarray, k: int, crop: tuple[int, int, int, int], bands: int,
+                 gain: np.ndarray) -> tuple:
+    """Image ``k``'s part of the multiband blend over ``crop`` (canvas pixels, from :func:`_reach_of_own`).
+
+    Returns ``(crop, sl, own, lap0, coarse)``: the crop, the image's pixels in it ``sl``, which of them it owns, the
+    level-0 Laplacian there (copied where it owns) and, per coarser level, the Laplacian times the blurred seam
+    weight and that weight.
+    """
+    img, mask, (x, y) = w.images[k], w.masks[k], w.corners[k]
+    ax0, ay0, ax1, ay1 = crop
+    # the part of the image inside the crop, in the crop's and in the image's pixels
+    ix0, iy0, ix1, iy1 = max(x, ax0), max(y, ay0), min(x + mask.shape[1], ax1), min(y + mask.shape[0], ay1)
+    sl = (slice(iy0 - ay0, iy1 - ay0), slice(ix0 - ax0, ix1 - ax0))
+    isl = (slice(iy0 - y, iy1 - y), slice(ix0 - x, ix1 - x))
+    sub = np.zeros((ay1 - ay0, ax1 - ax0, 3), np.float32)
+    m = np.zeros((ay1 - ay0, ax1 - ax0), np.float32)
+    im = img[isl] if img.ndim == 3 else cv2.cvtColor(img[isl], cv2.COLOR_GRAY2BGR)
+    # warped images are 0 outside their mask, so image * mask is the gained image itself
+    np.multiply(im, gain[isl] if gain.ndim == 3 else gain, out=sub[sl], casting="unsafe")
+    m[sl] = mask[isl] > 0
+    own = labels[iy0:iy1, ix0:ix1] == k
+    # level 0 copies `own` pixels; only the coarser levels need the float weight, so level 0's is built, shrunk
+    # and dropped before the first Laplacian level exists (memory: the full-size box arrays are the peak)
+    weight = np.zeros_like(m)
+    weight[sl] = own
+    weight = cv2.pyrDown(weight)
+    # normalised pyramids (image * mask and mask blurred together, then divided) extend each level smoothly
+    # past the image border, so no artificial black edge leaks into the blend
+    gm, gw, norm = sub, m, sub
+    del sub, m
+    coarse = []
+    for lev in range(bands + 1):
+        if lev < bands:
+            gm, gw = cv2.pyrDown(gm), cv2.pyrDown(gw)
+            nxt = cv2.divide(gm, _three(np.maximum(gw, 1e-6)))
+        if lev == 0:  # hard weights: this image's own pixels, whose Laplacian alone is needed
+            lap0 = _level0_laplacian(norm, nxt, sl)
+        else:
+            if lev < bands:
+                lap = cv2.pyrUp(nxt, dstsize=(norm.shape[1], norm.shape[0]))
+                cv2.subtract(norm, lap, dst=lap)
+            else:
+                lap = norm
+            cv2.multiply(lap, _three(weight), dst=lap)
+            coarse.append((lap, weight))
+        if lev < bands:
+            norm = nxt
+            if lev > 0:  # level 0's weight was shrunk before the loop
+                weight = cv2.pyrDown(weight)
+    return crop, sl, own, lap0, coarse
 
 
 def blend_multiband(w: Warped, labels: np.ndarray, bands: int, gains=None) -> np.ndarray:
@@ -326,58 +385,36 @@ def blend_multiband(w: Warped, labels: np.ndarray, bands: int, gains=None) -> np
     acc = [np.zeros(((gy1 - gy0) >> k, (gx1 - gx0) >> k, 3), np.float32) for k in range(bands + 1)]
     # level 0 needs no weight sum: the seam labels give every covered pixel to exactly one image
     wsum = [None] + [np.zeros(((gy1 - gy0) >> k, (gx1 - gx0) >> k), np.float32) for k in range(1, bands + 1)]
-    for k, (img, mask, (x, y), box) in enumerate(zip(w.images, w.masks, w.corners, boxes)):
-        crop = _reach_of_own(labels, k, (x, y), mask.shape, box, P)
-        if crop is None:  # the seams gave this image no pixel: it adds nothing at any level
-            continue
-        ax0, ay0, ax1, ay1 = crop
-        # the part of the image inside the crop, in the crop's and in the image's pixels
-        ix0, iy0, ix1, iy1 = max(x, ax0), max(y, ay0), min(x + mask.shape[1], ax1), min(y + mask.shape[0], ay1)
-        sl = (slice(iy0 - ay0, iy1 - ay0), slice(ix0 - ax0, ix1 - ax0))
-        isl = (slice(iy0 - y, iy1 - y), slice(ix0 - x, ix1 - x))
-        sub = np.zeros((ay1 - ay0, ax1 - ax0, 3), np.float32)
-        m = np.zeros((ay1 - ay0, ax1 - ax0), np.float32)
-        im = img[isl] if img.ndim == 3 else cv2.cvtColor(img[isl], cv2.COLOR_GRAY2BGR)
-        gain = _gain_of(g, k)
-        # warped images are 0 outside their mask, so image * mask is the gained image itself
-        np.multiply(im, gain[isl] if gain.ndim == 3 else gain, out=sub[sl], casting="unsafe")
-        m[sl] = mask[isl] > 0
-        own = labels[iy0:iy1, ix0:ix1] == k
-        # level 0 copies `own` pixels; only the coarser levels need the float weight, so level 0's is built, shrunk
-        # and dropped before the first Laplacian level exists (memory: the full-size box arrays are the peak)
-        weight = np.zeros_like(m)
-        weight[sl] = own
-        weight = cv2.pyrDown(weight)
-        # normalised pyramids (image * mask and mask blurred together, then divided) extend each level smoothly
-        # past the image border, so no artificial black edge leaks into the blend
-        gm, gw, norm = sub, m, sub
-        del sub, m
-        for lev in range(bands + 1):
-            if lev < bands:
-                gm, gw = cv2.pyrDown(gm), cv2.pyrDown(gw)
-                nxt = cv2.divide(gm, _three(np.maximum(gw, 1e-6)))
+
+    def add(share) -> None:  # in image order, in this thread: the sums do not depend on the threads' timing
+        (ax0, ay0, _, _), sl, own, lap0, coarse = share
+        oy, ox = ay0 - gy0, ax0 - gx0
+        dst = acc[0][oy + sl[0].start:oy + sl[0].stop, ox + sl[1].start:ox + sl[1].stop]
+        cv2.copyTo(lap0, own.view(np.uint8), dst)
+        for lev, (lap, weight) in enumerate(coarse, 1):
             oy, ox = (ay0 - gy0) >> lev, (ax0 - gx0) >> lev
-            if lev == 0:  # hard weights: this image's own pixels, whose Laplacian alone is needed
-                dst = acc[0][oy + sl[0].start:oy + sl[0].stop, ox + sl[1].start:ox + sl[1].stop]
-                cv2.copyTo(_level0_laplacian(norm, nxt, sl), own.view(np.uint8), dst)
-            else:
-                if lev < bands:
-                    lap = cv2.pyrUp(nxt, dstsize=(norm.shape[1], norm.shape[0]))
-                    cv2.subtract(norm, lap, dst=lap)
-                else:
-                    lap = norm
-                hh, wl = weight.shape
-                cv2.multiply(lap, _three(weight), dst=lap)
-                dst = acc[lev][oy:oy + hh, ox:ox + wl]
-                cv2.add(dst, lap, dst=dst)
-                dst = wsum[lev][oy:oy + hh, ox:ox + wl]
-                cv2.add(dst, weight, dst=dst)
-                del lap
-            if lev < bands:
-                norm = nxt
-                if lev > 0:  # level 0's weight was shrunk before the loop
-                    weight = cv2.pyrDown(weight)
-        del gm, gw, norm, nxt, own
+            hh, wl = weight.shape
+            dst = acc[lev][oy:oy + hh, ox:ox + wl]
+            cv2.add(dst, lap, dst=dst)
+            dst = wsum[lev][oy:oy + hh, ox:ox + wl]
+            cv2.add(dst, weight, dst=dst)
+
+    # the images' pyramids are built up to BLEND_THREADS at a time (OpenCV and numpy release the GIL) and added in
+    # order; the crops being built at once never cover more pixels than the largest padded box, so the memory peak is
+    # the one of building that box alone (what warp.canvas_memory counts)
+    room = max((b[2] - b[0]) * (b[3] - b[1]) for b in boxes)
+    pending: deque = deque()  # (future, crop pixels)
+    with ThreadPoolExecutor(BLEND_THREADS) as pool:
+        for k, (mask, corner, box) in enumerate(zip(w.masks, w.corners, boxes)):
+            crop = _reach_of_own(labels, k, corner, mask.shape, box, P)
+            if crop is None:  # the seams gave this image no pixel: it adds nothing at any level
+                continue
+            area = (crop[2] - crop[0]) * (crop[3] - crop[1])
+            while pending and (len(pending) >= BLEND_THREADS or sum(a for _, a in pending) + area > room):
+                add(pending.popleft()[0].result())
+            pending.append((pool.submit(_image_share, w, labels, k, crop, bands, _gain_of(g, k)), area))
+        while pending:
+            add(pending.popleft()[0].result())
     out = None
     for lev in range(bands, -1, -1):
         level = acc[lev] if lev == 0 else cv2.divide(acc[lev], _three(np.maximum(wsum[lev], 1e-8)))
