@@ -1,5 +1,5 @@
 """Stage `panorama_features`: per set of `panorama.data`, every image shrunk to the registration resolution, then
-its features. Layout: every subfolder is one set, its images in any order (truth.json optional). Writes
+its features (with that grey image, which `panorama_match` tracks in when asked). Layout: every subfolder is one set, its images in any order (truth.json optional). Writes
 `<out>/<set>/<image stem>.npz` and `<out>/dropped.json` (sets and images not used, with the reason)."""
 
 from pathlib import Path
@@ -46,9 +46,10 @@ def panorama_features(st: Stage) -> None:
             st.drop(s.name, f"{len(got)} usable image(s), a panorama needs at least 2")
             continue
         with st.timer("features"):
-            sizes, feats = panorama.features_of([img for _, img in got], p)
-        for (f, img), size, ft in zip(got, sizes, feats):
-            io.save_npz(out / s.name / f"{f.stem}.npz", **ft.to_arrays(), work_size=size,
+            sizes, feats, grays = panorama.features_and_images_of([img for _, img in got], p)
+        for (f, img), size, ft, gray in zip(got, sizes, feats, grays):
+            # the grey image at the registration resolution: panorama_match tracks in it (panorama.match.pair_refine)
+            io.save_npz(out / s.name / f"{f.stem}.npz", **ft.to_arrays(), work_size=size, work_gray=gray,
                         full_size=(img.shape[1], img.shape[0]), image_file=f.name)
         done += 1
     st.finish(out, done, f"sets' features in {out}", f"{st.args.images}: no panorama set with 2 or more usable images")

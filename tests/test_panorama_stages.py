@@ -125,3 +125,30 @@ def test_find_panorama_truth_is_optional_per_set_and_image(tmp_path, views):
     io.save_json(tmp_path / "truth.json", {"sets": [{"name": "a", "images": ["v0.jpg"], "H": [[1, 2]]}]})
     with pytest.raises(InputError, match=r"truth.json: field `sets\[0\].H\[0\]` must be"):
         datasets.find_panorama(tmp_path)
+
+
+def test_fast_preset_values_run_in_the_stages_as_in_stitch(tmp_path, views, monkeypatch):
+    # `panorama.match.pair_refine: lk` tracks in the grey work images, which panorama_features stores with the
+    # features: the stages give the match graph that stitch(..., preset "fast") builds from the same seed
+    from cvpipe import io, panorama
+    from cvpipe.panorama.presets import PRESETS
+
+    imgs, _ = views
+    data, out = tmp_path / "in", tmp_path / "out"
+    for k, img in enumerate(imgs):
+        io.save_image(data / "room" / f"view_{k}.png", img)
+    values = yaml.safe_load(default_params_path().read_text())
+    for section, fields in PRESETS["fast"].items():
+        values["panorama"][{"matching": "match"}.get(section, section)].update(fields)
+    params = tmp_path / "params_fast.yaml"
+    params.write_text(yaml.safe_dump(values))
+    monkeypatch.chdir(tmp_path)
+    _run_stage("panorama_features", monkeypatch, images=data, out=out / "features", params=params)
+    _run_stage("panorama_match", monkeypatch, features=out / "features", out=out / "matches", params=params)
+    graph = panorama.MatchGraph.from_arrays(io.load_npz(out / "matches" / "room.npz"))
+    seed = values["panorama"]["match"]["seed"]
+    grey = [io.read_image(data / "room" / f"view_{k}.png", "gray") for k in range(len(imgs))]
+    want = panorama.stitch(grey, **panorama.preset_sections("fast"), rng=seed).graph
+    assert graph.edges.keys() == want.edges.keys() and len(want.edges) >= 2
+    for ij, e in want.edges.items():
+        np.testing.assert_allclose(graph.edges[ij].H, e.H, rtol=1e-9, atol=1e-9)

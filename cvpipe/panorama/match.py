@@ -423,7 +423,8 @@ def match_set(item: tuple, p) -> tuple[MatchGraph, float]:
     Parameters
     ----------
     item : tuple
-        ``(features, work sizes)``: each image's :class:`~cvpipe.features.Features` and ``(w, h)``.
+        ``(features, work sizes, grays)``: each image's :class:`~cvpipe.features.Features`, its ``(w, h)`` and its
+        grey image at that size (None unless ``p.pair_refine`` tracks in them).
     p : PanoramaMatchParams
         The ``panorama.match`` section (:func:`match_graph_with`; its ``seed`` seeds RANSAC).
 
@@ -434,7 +435,7 @@ def match_set(item: tuple, p) -> tuple[MatchGraph, float]:
     """
     import time
 
-    feats, sizes = item
+    feats, sizes, grays = item
     t0 = time.perf_counter()
-    graph = match_graph_with(feats, sizes, p, p.seed)
+    graph = match_graph_with(feats, sizes, p, p.seed, grays)
     return graph, time.perf_counter() - t0
