@@ -9,7 +9,7 @@ import pytest
 
 MODULES = ["cvpipe.linalg", "cvpipe.matching", "cvpipe.panorama", "cvpipe.panorama.features",
            "cvpipe.panorama.register", "cvpipe.panorama.seams", "cvpipe.panorama.warp", "cvpipe.panorama.blend",
-           "cvpipe.panorama.crop"]
+           "cvpipe.panorama.crop", "cvpipe.panorama.match"]
 
 
 @pytest.mark.parametrize("name", MODULES)

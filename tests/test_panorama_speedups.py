@@ -103,6 +103,22 @@ def test_canvas_maps_from_row_and_column_equal_the_full_grid(projection):
     assert np.abs(x - xe)[ok].max() < 2e-3 and np.abs(y - ye)[ok].max() < 2e-3
 
 
+
+def test_hamming_ratio_matches_equal_opencv_knn_matcher():
+    from cvpipe.panorama.match import hamming_ratio_matches
+
+    rng = np.random.default_rng(4)
+    q = rng.integers(0, 256, (400, 32), dtype=np.uint8)
+    t = rng.integers(0, 256, (500, 32), dtype=np.uint8)
+    t[:150] = q[:150] ^ (rng.random((150, 32)) < 0.04).astype(np.uint8)  # 150 true matches, a few bits off
+    t[150:160] = t[140:150]  # exact twins in the train set: equal distances, the ratio test must refuse those
+    knn = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(q, t, k=2)
+    want = [(m.queryIdx, m.trainIdx, m.distance) for m, n in knn if m.distance < 0.8 * n.distance]
+    want.sort(key=lambda r: r[2])  # stable: ties stay in query order
+    got = hamming_ratio_matches(q, t, 0.8)
+    assert got.tolist() == [[a, b] for a, b, _ in want]
+    assert 100 < len(got) < 150 and not set(got[:, 0].tolist()) & set(range(140, 150))
+
 def test_multiband_keeps_pixels_far_from_the_seam_exact():
     rng = np.random.default_rng(3)
     a = rng.integers(0, 256, (120, 160, 3)).astype(np.uint8)
