@@ -21,6 +21,7 @@ import os
 import re
 import sys
 import warnings
+import weakref
 from types import ModuleType
 
 from . import __version__, interrupt
@@ -78,26 +79,39 @@ def module_constants(full: str, names: tuple[str, ...] = ("HELP", "EXAMPLE")) ->
     return found
 
 
-class _LazySubParsers(argparse._SubParsersAction):
-    """Subparsers whose arguments are added only when that subcommand is the one being parsed.
+class LazyCommands:
+    """Subcommands of a parser whose arguments are added only when that subcommand is the one being run: only its
+    module is imported (start-up), with argparse's public API alone (:func:`load_chosen` finds the one named).
 
-    Also reports arguments a subcommand does not accept with that subcommand's usage (argparse would print the
-    top-level usage, which does not say what the subcommand takes).
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+    package : str
+        The package holding one module per subcommand, each with ``HELP``, ``EXAMPLE``, ``add_arguments`` and ``run``.
+    names : dict
+        Subcommand name -> module in ``package`` (a module that does not exist gives no subcommand).
+    dest : str
+        The namespace attribute that receives the subcommand's name.
     """
 
-    def __init__(self, *args, **kwargs):
-        super().__init__(*args, **kwargs)
+    def __init__(self, parser: argparse.ArgumentParser, package: str, names: dict[str, str], dest: str):
+        sub = parser.add_subparsers(dest=dest, metavar="COMMAND", required=True)
+        self.parsers: dict[str, argparse.ArgumentParser] = {}
         self._modules: dict[str, str] = {}
-
-    def add_lazy(self, name: str, module: str, help: str, example: str) -> argparse.ArgumentParser:
-        p = self.add_parser(name, help=help, description=f"{help}\n\nexample:\n  {example}",
-                            formatter_class=argparse.RawDescriptionHelpFormatter)
-        self._modules[name] = module
-        return p
+        for name, module in names.items():
+            full = f"{package}.{module}"
+            consts = module_constants(full)
+            if consts is None:
+                continue
+            text = f"{consts['HELP']}\n\nexample:\n  {consts['EXAMPLE']}"
+            self.parsers[name] = sub.add_parser(name, help=consts["HELP"], description=text,
+                                                formatter_class=argparse.RawDescriptionHelpFormatter)
+            self._modules[name] = full
+        _LAZY[parser] = self
 
     def load(self, name: str) -> argparse.ArgumentParser:
         """The subparser ``name`` with its arguments (imports its module on first use)."""
-        p = self._name_parser_map[name]
+        p = self.parsers[name]
         module_name = self._modules.pop(name, None)
         if module_name is not None:
             module = importlib.import_module(module_name)
@@ -109,26 +123,50 @@ class _LazySubParsers(argparse._SubParsersAction):
             p.set_defaults(_run=module.run)
         return p
 
-    def __call__(self, parser, namespace, values, option_string=None):
-        name = values[0]
-        if name in self._name_parser_map:
-            self.load(name)
-        super().__call__(parser, namespace, values, option_string)
-        extras = vars(namespace).pop(argparse._UNRECOGNIZED_ARGS_ATTR, None)
-        if extras:
-            self._name_parser_map[name].error(f"unrecognized arguments: {' '.join(extras)}")
+
+#: parser -> its lazy subcommands (a parser's options before its subcommand take no values, so the first word of the
+#: command line that is not an option names the subcommand)
+_LAZY: "weakref.WeakKeyDictionary[argparse.ArgumentParser, LazyCommands]" = weakref.WeakKeyDictionary()
 
 
-def add_subcommands(parser: argparse.ArgumentParser, package: str, names: dict[str, str], dest: str) -> _LazySubParsers:
+def add_subcommands(parser: argparse.ArgumentParser, package: str, names: dict[str, str], dest: str) -> LazyCommands:
     """Add one lazily built subparser per module of ``package`` that exists, with its one-line help and example."""
-    parser.register("action", "parsers", _LazySubParsers)
-    sub = parser.add_subparsers(dest=dest, metavar="COMMAND", required=True)
-    for name, module in names.items():
-        full = f"{package}.{module}"
-        consts = module_constants(full)
-        if consts is not None:
-            sub.add_lazy(name, full, consts["HELP"], consts["EXAMPLE"])
-    return sub
+    return LazyCommands(parser, package, names, dest)
+
+
+def load_chosen(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.ArgumentParser:
+    """Give the subcommands that ``argv`` names (and theirs, for ``bench NAME``) their arguments; returns the parser
+    of the innermost one named (``parser`` itself when none is)."""
+    chosen, rest = parser, list(argv)
+    while (lazy := _LAZY.get(chosen)) is not None:
+        k = next((i for i, word in enumerate(rest) if not word.startswith("-")), None)
+        if k is None or rest[k] not in lazy.parsers:
+            break
+        chosen, rest = lazy.load(rest[k]), rest[k + 1:]
+    return chosen
+
+
+class CommandParser(argparse.ArgumentParser):
+    """An argument parser that gives the subcommands a command line names their arguments before parsing it
+    (:func:`load_chosen`), and reports arguments a subcommand does not accept with that subcommand's usage (argparse
+    would print the top-level usage, which does not say what the subcommand takes)."""
+
+    def parse_known_args(self, args=None, namespace=None):
+        load_chosen(self, sys.argv[1:] if args is None else list(args))
+        return super().parse_known_args(args, namespace)
+
+    def parse_args(self, args=None, namespace=None):
+        argv = sys.argv[1:] if args is None else list(args)
+        chosen = load_chosen(self, argv)
+        parsed, extras = self.parse_known_args(argv, namespace)
+        if extras:
+            chosen.error(f"unrecognized arguments: {' '.join(extras)}")
+        return parsed
+
+
+def command_parser(*names: str) -> argparse.ArgumentParser:
+    """The parser of ``cvpipe NAME...`` with its arguments, e.g. ``command_parser("bench", "guard")``."""
+    return load_chosen(build_parser(), list(names))
 
 
 def add_global_flags(parser: argparse.ArgumentParser, suppress: bool = False) -> None:
@@ -142,7 +180,7 @@ def add_global_flags(parser: argparse.ArgumentParser, suppress: bool = False) ->
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = CommandParser(
         prog="cvpipe",
         description="Reproducible classical computer-vision pipelines.",
         epilog=f"example:\n  {EXAMPLE}\n\n"

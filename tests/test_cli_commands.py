@@ -339,9 +339,7 @@ def test_method_names_are_those_of_dvc_yaml():
 
 
 def _parser(name):
-    parser = cli.build_parser()
-    sub = parser._subparsers._group_actions[0]
-    return sub.load(name)
+    return cli.command_parser(name)
 
 
 #: the flags of each command that take one of a fixed list of values (hough's `--refine` is an on/off switch); a
