@@ -104,6 +104,29 @@ def test_canvas_maps_from_row_and_column_equal_the_full_grid(projection):
 
 
 
+
+@pytest.mark.parametrize("projection", ["plane", "cylindrical", "spherical"])
+@pytest.mark.parametrize("channels", [3, 1])
+def test_warp_image_equals_remap_with_the_maps_of_canvas_to_image(projection, channels, monkeypatch):
+    # the compiled maps in strips of rows (17 rows here, so several strips and a short last one) give exactly what
+    # cv2.remap gives with canvas_to_image's float32 maps over the whole box, zero outside the image
+    monkeypatch.setattr(panorama.warp, "WARP_STRIP_PIXELS", 17 * 300)
+    rng = np.random.default_rng(6)
+    img = cv2.GaussianBlur(rng.integers(0, 256, (120, 160, 3)).astype(np.uint8), (0, 0), 1.5)
+    img = img if channels == 3 else np.ascontiguousarray(img[..., 1])
+    G = np.array([[0.9, 0.08, 30.0], [-0.05, 1.1, 12.0], [2e-4, -1e-4, 1.0]])
+    (box,) = panorama.warp.warp_bounds([(160, 120)], [G], projection, 300.0, (160, 120))
+    warped, mask = panorama.warp.warp_image(img, G, box, projection, 300.0, (160, 120))
+    x0, y0, x1, y1 = (int(b) for b in box)
+    u, v = np.arange(x0, x1, dtype=np.float32)[None, :], np.arange(y0, y1, dtype=np.float32)[:, None]
+    x, y, ok = panorama.warp.canvas_to_image(u, v, G, projection, 300.0, (160, 120))
+    ok &= (x > -0.5) & (x < 159.5) & (y > -0.5) & (y < 119.5)
+    mx, my = np.where(ok, x, np.float32(-10)), np.where(ok, y, np.float32(-10))
+    want = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    want[~ok] = 0
+    assert warped.shape[0] > 3 * 17 and 0.3 < ok.mean() < 1
+    assert np.array_equal(mask, np.where(ok, 255, 0).astype(np.uint8)) and np.array_equal(warped, want)
+
 def test_hamming_ratio_matches_equal_opencv_knn_matcher():
     from cvpipe.panorama.match import hamming_ratio_matches
 

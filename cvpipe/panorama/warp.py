@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 
 from ..errors import BudgetError, EstimationError, memory_budget
+from . import _warp
 from .features import _workers, rescale_homographies, resize, resized_size, scale_for
 
 if TYPE_CHECKING:
@@ -99,6 +100,22 @@ def canvas_to_image(u: np.ndarray, v: np.ndarray, G: np.ndarray, projection: str
     ok : bool array
         False where the ray is behind the image's camera.
     """
+    M, alpha, chi, beta, gamma = _ray_factors(u, v, G, projection, focal, ref_size)
+
+    def coordinate(m):
+        h = m[0] * alpha + m[2] * chi
+        return (h if gamma is None else h * gamma) + m[1] * beta
+
+    z = coordinate(M[2])
+    ok = z > 1e-12
+    zs = np.where(ok, z, M.dtype.type(1))
+    return coordinate(M[0]) / zs, coordinate(M[1]) / zs, ok
+
+
+def _ray_factors(u: np.ndarray, v: np.ndarray, G: np.ndarray, projection: str, focal: float,
+                 ref_size: tuple[int, int]) -> tuple:
+    """``(M, alpha, chi, beta, gamma)``: the ray at ``(u, v)`` is ``(alpha(u) gamma(v), beta(v), chi(u) gamma(v))``
+    (``gamma`` None: 1) and ``M`` (float32 when ``u`` is) takes rays to image pixels."""
     check_projection(projection)
     u, v = np.asarray(u), np.asarray(v)
     dtype = np.float32 if u.dtype == np.float32 else np.float64
@@ -116,16 +133,7 @@ def canvas_to_image(u: np.ndarray, v: np.ndarray, G: np.ndarray, projection: str
         else:
             phi = v / dtype(focal)
             beta, gamma = np.sin(phi), np.cos(phi)
-    M = M.astype(dtype)
-
-    def coordinate(m):
-        h = m[0] * alpha + m[2] * chi
-        return (h if gamma is None else h * gamma) + m[1] * beta
-
-    z = coordinate(M[2])
-    ok = z > 1e-12
-    zs = np.where(ok, z, dtype(1))
-    return coordinate(M[0]) / zs, coordinate(M[1]) / zs, ok
+    return M.astype(dtype), alpha, chi, beta, gamma
 
 
 def _border(size: tuple[int, int], per_side: int = 48) -> np.ndarray:
@@ -199,22 +207,24 @@ def warp_image(img: np.ndarray, G: np.ndarray, box: Sequence[int], projection: s
     warped = np.empty((y1 - y0, x1 - x0) + img.shape[2:], img.dtype)
     mask = np.empty((y1 - y0, x1 - x0), np.uint8)
     # float32 keeps 1e-3 px precision on canvases of thousands of pixels at half the cost
-    u = np.arange(x0, x1, dtype=np.float32)[None, :]
+    u = np.arange(x0, x1, dtype=np.float32)
     h, w = img.shape[:2]
-    # in strips of rows: the float maps of a whole box cost about 40 B per pixel, a strip's stay small
-    rows = max(1, WARP_STRIP_PIXELS // max(1, x1 - x0))
+    # in strips of rows: the float maps of a whole box cost 8 B per pixel, a strip's stay small and are reused
+    rows = max(1, min(y1 - y0, WARP_STRIP_PIXELS // max(1, x1 - x0)))
+    mx, my = np.empty((rows, x1 - x0), np.float32), np.empty((rows, x1 - x0), np.float32)
+    channels = 1 if img.ndim == 2 else img.shape[2]
     for r0 in range(y0, y1, rows):
         r1 = min(y1, r0 + rows)
-        v = np.arange(r0, r1, dtype=np.float32)[:, None]
-        x, y, ok = canvas_to_image(u, v, G, projection, focal, ref_size)
-        # half a pixel of slack: the border samples themselves belong to the image
-        ok &= (x > -0.5) & (x < w - 0.5) & (y > -0.5) & (y < h - 0.5)
-        mx = np.where(ok, x, np.float32(-10)).astype(np.float32, copy=False)
-        my = np.where(ok, y, np.float32(-10)).astype(np.float32, copy=False)
+        v = np.arange(r0, r1, dtype=np.float32)
+        M, alpha, chi, beta, gamma = _ray_factors(u, v, G, projection, focal, ref_size)
+        gamma = np.ones_like(beta) if gamma is None else gamma
+        n, ok = r1 - r0, mask[r0 - y0:r1 - y0]
+        # the maps as canvas_to_image computes them, with half a pixel of slack (the border samples themselves
+        # belong to the image), -10 where the image has no pixel; in one compiled pass without temporaries
+        _warp.canvas_maps(alpha, chi, beta, gamma, M, w - 0.5, h - 0.5, mx[:n], my[:n], ok)
         out = warped[r0 - y0:r1 - y0]
-        cv2.remap(img, mx, my, cv2.INTER_LINEAR, dst=out, borderMode=cv2.BORDER_REPLICATE)
-        out[~ok] = 0
-        np.multiply(ok, np.uint8(255), out=mask[r0 - y0:r1 - y0], casting="unsafe")
+        cv2.remap(img, mx[:n], my[:n], cv2.INTER_LINEAR, dst=out, borderMode=cv2.BORDER_REPLICATE)
+        _warp.clear_outside(out.reshape(n, -1), ok, channels)
     return warped, mask
 
 
