@@ -127,6 +127,21 @@ def test_warp_image_equals_remap_with_the_maps_of_canvas_to_image(projection, ch
     assert warped.shape[0] > 3 * 17 and 0.3 < ok.mean() < 1
     assert np.array_equal(mask, np.where(ok, 255, 0).astype(np.uint8)) and np.array_equal(warped, want)
 
+
+def test_compiled_two_nearest_hamming_equals_opencv_with_ties():
+    from cvpipe.panorama import _match
+
+    rng = np.random.default_rng(8)
+    q = rng.integers(0, 256, (300, 32), dtype=np.uint8)
+    t = rng.integers(0, 256, (350, 32), dtype=np.uint8)
+    t[:100] = q[:100] ^ (rng.random((100, 32)) < 0.05).astype(np.uint8)
+    t[200:220] = t[:20]  # a later twin of a nearest row: OpenCV keeps the earlier row first
+    q[250:260] = t[300:310]  # distance 0
+    dist, idx = _match.hamming_two_nearest(q, t)
+    want_d, want_i = cv2.batchDistance(q, t, cv2.CV_32S, normType=cv2.NORM_HAMMING, K=2)
+    assert np.array_equal(dist, want_d) and np.array_equal(idx, want_i)
+    assert (dist[:20, 0] == dist[:20, 1]).all() and (idx[:20, 0] < idx[:20, 1]).all()
+
 def test_hamming_ratio_matches_equal_opencv_knn_matcher():
     from cvpipe.panorama.match import hamming_ratio_matches
 

@@ -20,6 +20,7 @@ from ..features import Features
 from ..homography import find_homography
 from ..matching import nearest_two, ratio_matches
 from ..params import PanoramaMatchParams, section_or_default
+from . import _match
 from .features import _workers
 from .track import DEFAULT_PAIR_REFINE, PAIR_REFINE_CHOICES, corners, track_pair
 
@@ -127,8 +128,10 @@ def hamming_ratio_matches(query: np.ndarray, train: np.ndarray, ratio: float) ->
     """Lowe's ratio test on binary descriptors by exact brute force: (M, 2) int64 pairs ``[i_query, i_train]`` whose
     nearest Hamming distance is below ``ratio`` times the second nearest, best first (ties in query order).
 
-    The two nearest of every query come from ``cv2.batchDistance`` as arrays (what ``cv2.BFMatcher.knnMatch``
-    computes, without a Python object per match: a third of the time for 1500 x 1500 ORB descriptors).
+    The two nearest of every query come as arrays: for 32-byte descriptors (ORB) from a compiled search that compares
+    8 bytes per ``popcnt`` (1.6x faster than OpenCV's for 1500 x 1400 descriptors), otherwise from
+    ``cv2.batchDistance`` (what ``cv2.BFMatcher.knnMatch`` computes, without a Python object per match); ties go to
+    the earlier train row, as OpenCV's do.
 
     Examples
     --------
@@ -143,7 +146,10 @@ def hamming_ratio_matches(query: np.ndarray, train: np.ndarray, ratio: float) ->
     if len(query) == 0 or len(train) == 0:
         return np.zeros((0, 2), np.int64)
     k = 2 if len(train) >= 2 else 1
-    dist, idx = cv2.batchDistance(query, train, cv2.CV_32S, normType=cv2.NORM_HAMMING, K=k)
+    if k == 2 and query.shape[1] == train.shape[1] == 32:  # ORB's 32 bytes: the compiled search
+        dist, idx = _match.hamming_two_nearest(np.ascontiguousarray(query), np.ascontiguousarray(train))
+    else:
+        dist, idx = cv2.batchDistance(query, train, cv2.CV_32S, normType=cv2.NORM_HAMMING, K=k)
     keep = np.ones(len(query), bool) if k == 1 else dist[:, 0] < ratio * dist[:, 1]
     rows = np.flatnonzero(keep)
     order = np.argsort(dist[rows, 0], kind="stable")
