@@ -25,7 +25,9 @@ from .warp import Warped
 
 def _overlaps(w: Warped, step: int):
     """Yield (i, j, gray_i, gray_j) over the subsampled overlap of every pair of warped images."""
-    for i, j, _, _, gi, gj in _samples(w, step, channels=False):
+    # each image's grey once (the conversion is per pixel: the same values as converting each pair's samples)
+    greys = [img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) for img in w.images]
+    for i, j, _, _, gi, gj in _samples(Warped(greys, w.masks, w.corners, w.size, w.origin), step, channels=False):
         yield i, j, gi[:, 0], gj[:, 0]
 
 
@@ -115,11 +117,12 @@ def _samples(w: Warped, step: int, channels: bool):
             rows, cols = np.nonzero(both)
             vals = []
             for k, s in ((i, si), (j, sj)):
-                img = np.ascontiguousarray(w.images[k][s])
-                if img.ndim == 2:
-                    img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
-                v = img if channels else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)[..., None]
-                vals.append(v[both].astype(np.float32).reshape(len(rows), -1))
+                img = w.images[k][s]
+                if img.ndim == 2 and channels:
+                    img = cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_GRAY2BGR)
+                elif img.ndim == 3 and not channels:
+                    img = cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_BGR2GRAY)
+                vals.append(img[both].astype(np.float32).reshape(len(rows), -1))
             yield i, j, y0 + rows * step, x0 + cols * step, vals[0], vals[1]
 
 
