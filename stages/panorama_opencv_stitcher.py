@@ -1,7 +1,10 @@
 """Stage `panorama_opencv_stitcher`: the cv2.Stitcher baseline on the same sets of `panorama.data` and at the same
-resolutions (`<out>/<set>.png`, `<set>.json`; its failures and the images it leaves out are recorded)."""
+resolutions, its RNG seeded with `panorama.match.seed` (`<out>/<set>.png`, `<set>.json` with the homographies its
+cameras imply; its failures and the images it leaves out are recorded)."""
 
 from pathlib import Path
+
+import numpy as np
 
 from cvpipe import datasets, io, panorama
 from cvpipe.errors import InputError
@@ -22,9 +25,12 @@ def panorama_opencv_stitcher(st: Stage) -> None:
             except InputError as exc:
                 st.drop(f"{s.name}/{f.name}", str(exc))
         with st.timer("stitch"):
-            status, pano, used = panorama.opencv_stitch_with(images, *sections) if len(images) >= 2 else \
-                ("ERR_NEED_MORE_IMGS", None, [])
-        result = {"ok": status == "OK", "status": status, "used": used, "files": files}
+            r = panorama.opencv_stitch_with(images, *sections) if len(images) >= 2 else None
+        status, pano, used = ("ERR_NEED_MORE_IMGS", None, []) if r is None else (r.status, r.pano, r.used)
+        result = {"ok": status == "OK", "status": status, "used": used, "files": files,
+                  "full_sizes": [[img.shape[1], img.shape[0]] for img in images]}
+        if r is not None and r.homographies:  # what its cameras imply, input -> common frame, full resolution
+            result["G"] = {str(k): np.asarray(H).tolist() for k, H in r.homographies.items()}
         if pano is not None:
             io.save_image(out / f"{s.name}.png", pano)
             result.update(size=[pano.shape[1], pano.shape[0]], empty_share=float((pano == 0).all(axis=2).mean()))

@@ -39,7 +39,7 @@ def _leaves(d: dict, path: str = ""):
 
 
 def test_stages_on_a_folder_with_partial_truth(tmp_path, views, distractor, monkeypatch, repo_root):
-    from cvpipe import io
+    from cvpipe import io, panorama
 
     imgs, T = views
     data, out = tmp_path / "in", tmp_path / "out"
@@ -85,6 +85,22 @@ def test_stages_on_a_folder_with_partial_truth(tmp_path, views, distractor, monk
     assert ours["room"]["corner_error_px"] < 1.5
     assert ours["room"]["used_images"] == 3 and ours["room"]["dropped_images"] == 1 and ours["room"]["ok"] == 1
     assert ours["hall_v2"]["ok"] == 1 and "corner_error_px" not in ours["hall_v2"]  # no truth -> no error key
+    # cv2.Stitcher's error by our measure (median over pairs p < q of used views, at p's size), from the homographies
+    # its cameras imply: the record's figure equals one computed here from a fresh seeded run on the same photos
+    from cvpipe.metrics import corner_error
+    from cvpipe.params import PanoramaFeaturesParams, PanoramaMatchParams, PanoramaWarpParams
+
+    cv_room = metrics["panorama"]["opencv_stitcher"]["room"]
+    values = yaml.safe_load(params.read_text())["panorama"]
+    sections = [cls(**values[k]) for cls, k in ((PanoramaFeaturesParams, "features"),
+                                                 (PanoramaMatchParams, "match"), (PanoramaWarpParams, "warp"))]
+    photos = [io.read_image(f, "color") for f in sorted((data / "room").glob("*.png"))]  # view_0..2, zz_other
+    G = panorama.opencv_stitch_with(photos, *sections).homographies
+    true = [T[0] @ np.linalg.inv(T[k]) for k in range(3)]
+    errs = [corner_error(np.linalg.inv(G[q]) @ G[p], np.linalg.inv(true[q]) @ true[p], 320, 240)
+            for p in range(3) for q in range(p + 1, 3)]
+    want = float(np.median(errs))
+    assert cv_room["used_images"] == 3 and abs(cv_room["corner_error_px"] - want) < 1e-3, (cv_room, want)
     assert set(metrics["panorama"]) == {"ours", "opencv_stitcher"}
     for key, value in _leaves(metrics):  # DVC-displayable: numbers only, no dotted keys
         assert isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value), key

@@ -213,11 +213,11 @@ def test_opencv_stitch_with_makes_the_keyword_call(crops, monkeypatch):
     from cvpipe.params import PanoramaFeaturesParams, PanoramaMatchParams, PanoramaWarpParams
 
     calls = []
-    monkeypatch.setattr(opencv_baseline, "opencv_stitch", lambda *args: calls.append(args) or ("OK", None, []))
-    fp, mp, wp = PanoramaFeaturesParams(work_megapix=0.2), PanoramaMatchParams(min_confidence=0.8), \
+    monkeypatch.setattr(opencv_baseline, "opencv_stitch_cameras", lambda *args, **kw: calls.append((args, kw)) or "r")
+    fp, mp, wp = PanoramaFeaturesParams(work_megapix=0.2), PanoramaMatchParams(min_confidence=0.8, seed=7), \
         PanoramaWarpParams(compose_megapix=0.3)
-    assert panorama.opencv_stitch_with(crops, fp, mp, wp) == ("OK", None, [])
-    assert calls == [(crops, 0.2, 0.3, 0.8)]  # work_megapix, compose_megapix, min_confidence
+    assert panorama.opencv_stitch_with(crops, fp, mp, wp) == "r"
+    assert calls == [((crops, 0.2, 0.3, 0.8), {"seed": 7})]  # work_megapix, compose_megapix, min_confidence, seed
     _refused(lambda p: panorama.opencv_stitch_with(crops, fp, p, wp), PanoramaWarpParams())
 
 # the modules whose section entry points' Examples no other test module runs

@@ -124,22 +124,21 @@ def opencv_stitch(images: Sequence[np.ndarray], work_megapix: float, compose_meg
 
 
 def opencv_stitch_with(images: Sequence[np.ndarray], features: PanoramaFeaturesParams | None,
-                       matching: PanoramaMatchParams | None, warp: PanoramaWarpParams | None,
-                       ) -> tuple[str, np.ndarray | None, list[int]]:
-    """:func:`opencv_stitch` with our sections' settings: ``panorama.features.work_megapix``,
-    ``panorama.warp.compose_megapix`` and ``panorama.match.min_confidence`` (the ``panorama_opencv_stitcher``
-    stage's entry point; None: a section's defaults).
+                       matching: PanoramaMatchParams | None, warp: PanoramaWarpParams | None) -> OpenCVStitch:
+    """:func:`opencv_stitch_cameras` with our sections' settings: ``panorama.features.work_megapix``,
+    ``panorama.warp.compose_megapix``, ``panorama.match.min_confidence`` and ``panorama.match.seed`` (the
+    ``panorama_opencv_stitcher`` stage's entry point; None: a section's defaults).
 
     Examples
     --------
     >>> from cvpipe.params import PanoramaFeaturesParams
     >>> from cvpipe.samples import photo
     >>> img = photo("astronaut")
-    >>> status, pano, used = opencv_stitch_with([img[:, 200:], img[:, :320]], PanoramaFeaturesParams(), None, None)
-    >>> status, sorted(used), pano.shape[1] > 480
-    ('OK', [0, 1], True)
+    >>> r = opencv_stitch_with([img[:, 200:], img[:, :320]], PanoramaFeaturesParams(), None, None)
+    >>> r.status, sorted(r.used), r.pano.shape[1] > 480, sorted(r.homographies)
+    ('OK', [0, 1], True, [0, 1])
     """
     f = section_or_default(features, PanoramaFeaturesParams, "panorama.features")
     m = section_or_default(matching, PanoramaMatchParams, "panorama.match")
     w = section_or_default(warp, PanoramaWarpParams, "panorama.warp")
-    return opencv_stitch(images, f.work_megapix, w.compose_megapix, m.min_confidence)
+    return opencv_stitch_cameras(images, f.work_megapix, w.compose_megapix, m.min_confidence, seed=m.seed)

@@ -9,7 +9,8 @@ writes files. The records per set are:
 - ``crop`` (``panorama_crop``): ``{"ok", "size": [w, h], "empty_share", ...}`` or ``{"ok": false, "error",
   "failed_in"}`` (a failure of any of our stages travels down to it).
 - ``blend`` (``panorama_blend``): ``{"ok", "ghosting", ...}``.
-- ``opencv`` (``panorama_opencv_stitcher``): ``{"ok", "status", "files", "used", "size"}``.
+- ``opencv`` (``panorama_opencv_stitcher``): ``{"ok", "status", "files", "used", "full_sizes", "size"}`` and,
+  when it registered, ``G`` (input position -> the homography its cameras imply, full resolution).
 
 A set that never reached a stage has no record there (``None``); its reason is in the first stage's drops.
 """
@@ -60,13 +61,20 @@ def median_corner_error(h: dict, truth: Sequence[np.ndarray | None]) -> float | 
     used = h["used"]
     G = rescale_homographies([np.array(h["G"][str(a)]) for a in used], [h["work_sizes"][a] for a in used],
                              [h["full_sizes"][a] for a in used], used.index(h["reference"]))
-    known = [k for k, a in enumerate(used) if truth[a] is not None]
+    return pairwise_median_error(dict(zip(used, G)), truth, h["full_sizes"])
+
+
+def pairwise_median_error(G: dict, truth: Sequence[np.ndarray | None], full_sizes: Sequence) -> float | None:
+    """Median corner error of the pairwise homographies ``G[q]^-1 G[p]`` (``G``: input position -> homography to a
+    common frame, full-resolution pixels) against the true ones, over every pair of positions in ``G`` that both
+    have truth, at p's full size; None with fewer than two such positions."""
+    known = [a for a in sorted(G) if truth[a] is not None]
     errs = []
     for i, p in enumerate(known):
         for q in known[i + 1:]:
-            ours = np.linalg.inv(G[q]) @ G[p]
-            true = np.linalg.inv(truth[used[q]]) @ truth[used[p]]
-            errs.append(corner_error(ours, true, *h["full_sizes"][used[p]]))
+            est = np.linalg.inv(G[q]) @ G[p]
+            true = np.linalg.inv(truth[q]) @ truth[p]
+            errs.append(corner_error(est, true, *full_sizes[p]))
     return float(np.median(errs)) if errs else None
 
 
@@ -102,6 +110,11 @@ def _opencv(s: PanoramaSet, cv: dict | None) -> dict:
            "status": cv["status"]}
     if cv["ok"]:
         row.update(width=int(cv["size"][0]), height=int(cv["size"][1]), empty_share=cv["empty_share"])
+        if s.H is not None and cv.get("G"):
+            truth = [dict(zip([f.name for f in s.files], s.H)).get(name) for name in cv["files"]]
+            err = pairwise_median_error({int(k): np.array(v) for k, v in cv["G"].items()}, truth, cv["full_sizes"])
+            if err is not None:
+                row["corner_error_px"] = err
     else:
         row["error"] = f"cv2.Stitcher: {cv['status']}"
     return row
@@ -123,9 +136,9 @@ def compare_sets(sets: Sequence[PanoramaSet], homographies: dict, blends: dict, 
     list of dict
         Per method: ``ok``, ``used_images``, ``dropped_images`` (the set's images not in the panorama, whatever
         the reason) and, when stitched, ``width``/``height`` (pixels of
-        the final panorama: ours cropped, cv2.Stitcher's as returned) and ``empty_share``; ours also
-        ``corner_error_px`` (when the set has truth for two or more used images) and ``ghosting``; a failure's
-        ``error``.
+        the final panorama: ours cropped, cv2.Stitcher's as returned) and ``empty_share``; both
+        ``corner_error_px`` (when the set has truth for two or more used images: cv2.Stitcher's from the homographies
+        its cameras imply), ours also ``ghosting``; a failure's ``error``.
     """
     out = []
     for s in sets:
@@ -166,7 +179,7 @@ def not_processed(features_dropped: Sequence[dict], homographies: dict, crops: d
 def metrics_of(results: Sequence[dict]) -> dict:
     """Flat numeric metrics ``{"panorama": {<method>: {"all": {...}, <set>: {...}}}}`` (bool -> int, no strings).
 
-    Per set: ``ok``, ``used_images``, ``dropped_images``, ``width``, ``height`` (when stitched) and ours'
+    Per set: ``ok``, ``used_images``, ``dropped_images``, ``width``, ``height`` (when stitched) and
     ``corner_error_px`` (when the set has truth and the error is finite). ``all``: ``sets``, ``ok_sets``,
     ``used_images`` and, with truth, ``median_corner_error_px`` over the sets.
     """
@@ -212,11 +225,8 @@ def report_summary(results: Sequence[dict], pictures: list[dict], dropped: Seque
     for r in results:
         for method in METHODS:
             m = r[method]
-            if method == "ours":
-                err = m.get("corner_error_px")
-                acc = _fmt(err) if err is not None else (NO_TRUTH if not r["truth"] else "-")
-            else:
-                acc = "not measured" if r["truth"] else NO_TRUTH
+            err = m.get("corner_error_px")
+            acc = _fmt(err) if err is not None else (NO_TRUTH if not r["truth"] else "-")
             size = f"{m['width']}x{m['height']}" if "width" in m else "-"
             rows.append([r["set"], method, bool(m["ok"]), f"{m['used_images']} of {r['images']}", size, acc,
                          _fmt(m.get("empty_share"), 4), _fmt(m.get("ghosting")), m.get("error", "")])
