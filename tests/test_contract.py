@@ -264,9 +264,25 @@ def _peak_threads(cmd) -> int:
     return peak
 
 
-def _interrupt_stereo(cmd, out, delay, peak=None, second=None):
-    """Run ``cmd`` and send SIGINT ``delay`` seconds after its start (``peak`` None: start-up) or after it reached
-    ``peak`` threads (the parallel kernels), and a second one ``second`` seconds after the first (None: one only).
+def _loaded(pid: int, library: str) -> bool:
+    """Whether process ``pid`` has mapped a shared library whose path contains ``library``."""
+    try:
+        with open(f"/proc/{pid}/maps", encoding="utf-8") as fh:
+            return library in fh.read()
+    except (FileNotFoundError, ProcessLookupError):  # it has just ended
+        return False
+
+
+#: a library the stereo command maps only while it imports its modules, after its entry point took over Ctrl-C
+#: (``cvpipe._entry`` imports the standard library and ``cvpipe.interrupt`` alone first): pydantic's core, which the
+#: parameter models load (a signal before that lands in Python's own start-up, which no program handles)
+START_UP_LIBRARY = "_pydantic_core"
+
+
+def _interrupt_stereo(cmd, out, delay, peak=None, second=None, after=None):
+    """Run ``cmd`` and send SIGINT ``delay`` seconds after its start (``peak`` None), after it mapped the library
+    ``after`` (the imports), or after it reached ``peak`` threads (the parallel kernels), and a second one ``second``
+    seconds after the first (None: one only).
 
     Returns ``(proc, stdout, stderr)`` for a run that ended as interrupted before its results went out; None for
     one whose results went out whole (checked here): exit 0 when the signal came after the process ended, or 130
@@ -276,6 +292,12 @@ def _interrupt_stereo(cmd, out, delay, peak=None, second=None):
     t0 = time.monotonic()
     while proc.poll() is None and time.monotonic() - t0 < 300:
         n = _threads(proc.pid)
+        if after is not None:
+            if n is None or _loaded(proc.pid, after):
+                time.sleep(delay)
+                break
+            time.sleep(0.002)
+            continue
         if n is None or (peak is None and time.monotonic() - t0 > delay):
             break
         if peak is not None and n >= peak:
@@ -332,9 +354,9 @@ def test_ctrl_c_during_parallel_stereo(tmp_path, when):
         (out / "d.npy").unlink()
     # the kernels take a few tenths of a run: up to 5 runs, the signal sent 0-150 ms after the OpenMP threads
     # appeared, until one lands before the work is done
-    # start-up: the imports take the first few tenths of a second
-    for delay in ([0.1, 0.2, 0.3] if when == "start-up" else [0.0, 0.03, 0.06, 0.1, 0.15]):
-        done = _interrupt_stereo(cmd, out, delay, peak)
+    # start-up: the imports take a few tenths of a second after the parameter models' library is mapped
+    for delay in ([0.0, 0.05, 0.1] if when == "start-up" else [0.0, 0.03, 0.06, 0.1, 0.15]):
+        done = _interrupt_stereo(cmd, out, delay, peak, after=START_UP_LIBRARY if when == "start-up" else None)
         if done is not None:
             break
     else:
