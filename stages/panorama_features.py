@@ -1,6 +1,7 @@
 """Stage `panorama_features`: per set of `panorama.data`, every image shrunk to the registration resolution, then
-its features (with that grey image, which `panorama_match` tracks in when asked). Layout: every subfolder is one set, its images in any order (truth.json optional). Writes
-`<out>/<set>/<image stem>.npz` and `<out>/dropped.json` (sets and images not used, with the reason)."""
+its features, stored with that grey image (`panorama_match` tracks in it when asked). Layout: every subfolder is
+one set, its images in any order (truth.json optional). Writes `<out>/<set>/<image stem>.npz` and
+`<out>/dropped.json` (sets and images not used, with the reason)."""
 
 from pathlib import Path
 

@@ -362,7 +362,7 @@ def match_graph(feats: Sequence[Features], sizes: Sequence[tuple[int, int]], *, 
         edges[(i, j)] = Edge(i, j, H / H[2, 2], src[keep], dst[keep], conf)
 
     # exact brute force: float descriptors by a matrix product (faster than FLANN at these sizes), binary ones by
-    # OpenCV's Hamming distances
+    # Hamming distances (hamming_ratio_matches)
     binary = any(f.binary for f in feats)
 
     def full_match(ij):
