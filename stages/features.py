@@ -51,10 +51,7 @@ def features_stage(st: Stage) -> None:
             made[npz] = rel
             yield gray, a.scenes is not None and rel.parts[0] == a.scenes
 
-    item_fn = features.detect_item
-    if a.section == "logo.features":  # a logo gallery image is stored with its simulated views
-        from cvpipe.views import detect_views_item as item_fn
-    for name, (arrays, seconds) in st.map(item_fn, image_data(), shared=p,
+    for name, (arrays, seconds) in st.map(features.detect_item, image_data(), shared=p,
                                           desc=f"features {detector}", names=[r.as_posix() for r in rels]):
         st.timings["detect"] = st.timings.get("detect", 0.0) + seconds
         io.save_npz(out / Path(name).with_suffix(".npz"), **arrays)

@@ -186,6 +186,17 @@ def _shrink(gray: np.ndarray, scale: float) -> np.ndarray:
     return cv2.resize(gray, (max(1, round(w * scale)), max(1, round(h * scale))), interpolation=cv2.INTER_AREA)
 
 
+def _mask(shape: tuple[int, int], box: tuple | None) -> np.ndarray | None:
+    import numpy as np
+
+    if box is None:
+        return None
+    mask = np.zeros(shape, np.uint8)
+    x1, y1, x2, y2 = (int(round(v)) for v in box)
+    mask[y1:y2 + 1, x1:x2 + 1] = 255
+    return mask
+
+
 def _params(path: str) -> tuple[LogoFeaturesParams, LogoMatchParams, LogoVerifyParams]:
     if Path(path).is_file():
         return (load_section(LogoFeaturesParams, "logo.features", path),
@@ -200,7 +211,6 @@ def run_benchmark(root: Path, methods: list[str], fp: LogoFeaturesParams, mp: Lo
     from tqdm import tqdm
     from .. import io, logo
     from ..features import detect
-    from ..logo.gallery import reference_views
 
     gallery_imgs, tests = load_subset(root, min_box)
     extra = load_extra_labels()
@@ -208,8 +218,8 @@ def run_benchmark(root: Path, methods: list[str], fp: LogoFeaturesParams, mp: Lo
     by_detector, detector_time = {}, {}
     for d in needed:
         t0 = time.perf_counter()
-        refs = [r for b, n, g, box in gallery_imgs
-                for r in reference_views(b, n, g, d, fp.max_features, box, min_features=mp.min_features)]
+        refs = [logo.Reference(b, n, detect(g, d, fp.max_features, _mask(g.shape, box)), (g.shape[1], g.shape[0]),
+                                box) for b, n, g, box in gallery_imgs]
         by_detector[d] = logo.build_gallery(refs, mp.min_features, mp.reference_features)
         detector_time[d] = time.perf_counter() - t0
     galleries = {m: {d: by_detector[d] for d in logo.method_detectors(m)} for m in methods}
@@ -266,7 +276,6 @@ def run_leave_one_out(root: Path, methods: list[str], fp: LogoFeaturesParams, mp
     from tqdm import tqdm
     from .. import logo
     from ..features import detect
-    from ..logo.gallery import reference_views
 
     gallery_imgs, _ = load_subset(root, min_box)
     extra = load_extra_labels()
@@ -279,9 +288,9 @@ def run_leave_one_out(root: Path, methods: list[str], fp: LogoFeaturesParams, mp
                                  "extra_score": extra_score, "extra_labels": _extra_count(extra)},
                     "methods": {}}
     needed = list(dict.fromkeys(d for m in methods for d in logo.method_detectors(m)))
-    refs = {d: [(n.split("[")[0] if box is not None else None, r) for b, n, g, box in gallery_imgs
-                for r in reference_views(b, n, g, d, fp.max_features, box, min_features=mp.min_features)]
-            for d in needed}
+    refs = {d: [(n.split("[")[0] if box is not None else None,
+                 logo.Reference(b, n, detect(g, d, fp.max_features, _mask(g.shape, box)), (g.shape[1], g.shape[0]),
+                                box)) for b, n, g, box in gallery_imgs] for d in needed}
     answers: dict[str, list[dict]] = {m: [] for m in methods}
     for photo, (brand, gray) in tqdm(sorted(photos.items()), desc="loo", disable=None):
         small = _shrink(gray, scene_scale)

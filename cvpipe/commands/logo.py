@@ -58,31 +58,31 @@ def gallery_files(folder: str | Path) -> list[tuple[str, Path]]:
     return sorted(items, key=lambda t: (t[0], str(t[1])))
 
 
-def gallery_references(folder: str | Path, detector: str, max_features: int,
-                       min_features: int = 0) -> tuple[list[logo.Reference], dict[str, str]]:
-    """Read and detect every reference of a gallery folder (see :func:`gallery_files`), with the simulated views
-    of :func:`cvpipe.logo.reference_views` that have at least ``min_features`` keypoints.
+def gallery_references(folder: str | Path, detector: str,
+                       max_features: int) -> tuple[list[logo.Reference], dict[str, str]]:
+    """Read and detect every reference of a gallery folder (see :func:`gallery_files`).
 
     Returns
     -------
     references : list of Reference
         One per image file, blank ones included (they have no keypoints: :func:`cvpipe.logo.build_gallery` leaves
-        them out), each followed by its views.
+        them out).
     blank : dict
         Reference name -> ``"blank (one grey level, v)"`` for each image of one grey level.
     """
     from .. import io, logo
-    from ..logo.gallery import blank_reason, check_gallery_memory, features_nbytes, reference_views
-    
+    from ..features import detect
+    from ..logo.gallery import blank_reason, check_gallery_memory, features_nbytes
+
     refs, blank, held = [], {}, 0
-    for read, (brand, f) in enumerate(progress(gallery_files(folder), "gallery"), 1):
+    for brand, f in progress(gallery_files(folder), "gallery"):
         gray = io.read_image(f, "gray")
-        views = reference_views(brand, str(f), gray, detector, max_features, min_features=min_features)
-        refs += views
+        refs.append(logo.Reference(brand, str(f), detect(gray, detector, max_features),
+                                    (gray.shape[1], gray.shape[0])))
         if (why := blank_reason(gray)) is not None:
             blank[str(f)] = why
-        held += sum(features_nbytes(r.features) for r in views)
-        check_gallery_memory(held, read)  # refused while reading, before the whole folder is in memory
+        held += features_nbytes(refs[-1].features)
+        check_gallery_memory(held, len(refs))  # refused while reading, before the whole folder is in memory
     return refs, blank
 
 
@@ -201,7 +201,7 @@ def run(args: argparse.Namespace) -> int:
     for d in logo.method_detectors(args.method):
         with step(f"gallery ({d})"):
             # indexed before any scene runs, so that a gallery error is one line of its own
-            refs, blank = gallery_references(args.gallery, d, args.max_features, mp.min_features)
+            refs, blank = gallery_references(args.gallery, d, args.max_features)
             galleries[d] = logo.build_gallery(refs, mp.min_features, mp.reference_features)
         note_unused(refs, galleries[d], blank, mp.min_features)
     records, failed = [], 0

@@ -30,7 +30,7 @@ folder for the stages; the command and the benchmark read their own image folder
 
 from .detect import DEFAULT_EXTRA_SCORE, MAX_OVERLAP, Detection, decide, every_logo, quad_iou, recognize, verify_scene
 from .fused import METHODS, method_detectors, recognize_fused, verify_fused, verify_method_scene
-from .gallery import Gallery, Reference, build_gallery, reference_views
+from .gallery import Gallery, Reference, build_gallery
 from .match import Matches, match_item, match_scene
 from .report import (NO_TRUTH, brand_recall, confusion, draw_confusion, draw_detection, draw_missed, evaluate,
                      evaluate_records, found_counts, found_plot, missed_record, merge_dropped, metric_key, metrics_of, pick_method, pr_rows, quad_error,
@@ -45,6 +45,6 @@ __all__ = [
     "draw_missed", "evaluate", "evaluate_records", "every_logo", "fit_affine", "found_counts", "found_plot",
     "map_poses", "match_item", "match_scene", "merge_dropped", "method_detectors", "metric_key", "metrics_of",
     "missed_record", "pick_method", "pose_agrees", "pose_probability", "pr_rows", "quad_error", "quad_iou",
-    "recognize", "recognize_fused", "reference_views", "report_summary", "scene_record", "shape_problem", "significance",
+    "recognize", "recognize_fused", "report_summary", "scene_record", "shape_problem", "significance",
     "tested_references", "verify", "verify_fused", "verify_method_scene", "verify_scene",
 ]

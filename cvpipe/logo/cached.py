@@ -9,10 +9,9 @@ from pathlib import Path
 from .. import io
 from ..datasets import LogoInputs
 from ..errors import CvpipeError
-from ..features import NPZ_ARRAYS
+from ..features import NPZ_ARRAYS, Features
 from ..params import LogoMatchParams
 from .gallery import Gallery, Reference, blank_reason, build_gallery
-from ..views import split_views, view_name
 
 
 def feature_reasons(features: Path) -> dict[str, str]:
@@ -49,8 +48,7 @@ def load_gallery(inputs: LogoInputs, root: Path, features: Path, params: LogoMat
     -------
     gallery : Gallery
         Every reference file mapped to its brand (the brands in sorted order, a brand's files in the order
-        ``find_logo`` lists them), each followed by its simulated views (:mod:`cvpipe.views`) that have at
-        least ``min_features`` keypoints.
+        ``find_logo`` lists them).
     dropped : list of dict
         ``{"item", "reason"}`` for each reference left out (no features, blank, too few keypoints); the last entry
         of a brand left with no usable reference adds ``"; brand '<brand>' is not used"``.
@@ -65,11 +63,7 @@ def load_gallery(inputs: LogoInputs, root: Path, features: Path, params: LogoMat
                 dropped.append({"item": name, "reason": got})
                 continue
             w, h = (int(v) for v in got["image_size"])
-            for view, f in split_views(got):
-                if view is None:
-                    refs.append(Reference(brand, name, f, (w, h)))
-                elif len(f) >= params.min_features:  # a view is an addition: one too poor to verify is left out
-                    refs.append(Reference(brand, view_name(name, *view), f, (w, h)))
+            refs.append(Reference(brand, name, Features.from_arrays(got), (w, h)))
     gallery = build_gallery(refs, params.min_features, params.reference_features)
     few = set(gallery.dropped)
     dropped += [{"item": r.name, "reason": _too_few(root, r, params.min_features)} for r in refs if r.name in few]

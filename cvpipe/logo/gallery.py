@@ -14,7 +14,6 @@ from ..features import DETECTORS, Features, check_detector
 from ..geometry import image_corners
 from ..matching import flann_matcher
 from ..params import LogoMatchParams
-from ..views import detect_views, view_name
 
 #: the ``logo.match`` defaults: the one declaration of :func:`build_gallery`'s ``min_features``
 _MATCH = LogoMatchParams()
@@ -241,58 +240,3 @@ def build_gallery(references: Sequence[Reference], min_features: int = _MATCH.mi
     # mapping the references of one brand into a shared frame and verifying them as one model was measured and
     # rejected (no gain on FlickrLogos: docs/notes/logo.md); every reference is verified on its own
     return Gallery(detector, brands, tuple(usable), dropped, ref_of, local_of, brand_of_ref, matcher)
-
-
-def reference_views(brand: str, name: str, gray: np.ndarray, detector: str, max_features: int,
-                    box: tuple[float, float, float, float] | None = None,
-                    tilts: Sequence[tuple[float, float]] | None = None, min_features: int = 0) -> list[Reference]:
-    """A gallery image as references: its own keypoints and those of each simulated view (:func:`cvpipe.views.detect_views`).
-
-    Parameters
-    ----------
-    brand, name : str
-        As :class:`~cvpipe.logo.Reference`.
-    gray : (H, W) uint8
-        The reference image.
-    detector : str
-    max_features : int
-        Per view.
-    box : (x1, y1, x2, y2), optional
-        The logo's box inside a whole photo (keypoints from inside it only); default: the whole image.
-    tilts : sequence of (tilt, longitude), optional
-        The views (default: :func:`cvpipe.views.tilts_for` the detector).
-    min_features : int
-        A view with fewer keypoints is left out (it could not support a verified fit; the reference itself is
-        always returned, for :func:`~cvpipe.logo.build_gallery` to judge and name).
-
-    Returns
-    -------
-    list of Reference
-        The reference itself first, then one per view (named by :func:`cvpipe.views.view_name`, keypoints in the reference's
-        pixels, same size and box).
-
-    Examples
-    --------
-    >>> import cv2
-    >>> from cvpipe.samples import photo
-    >>> gray = cv2.cvtColor(photo("astronaut"), cv2.COLOR_BGR2GRAY)[:200, :200]
-    >>> refs = reference_views("nasa", "crop.png", gray, "sift", 500)
-    >>> [r.name for r in refs]
-    ['crop.png', 'crop.png (view: tilt 2 at 0 deg)', 'crop.png (view: tilt 2 at 90 deg)']
-    >>> all(((r.features.xy >= 0) & (r.features.xy <= 199)).all() for r in refs)
-    True
-    """
-    gray = np.asarray(gray)
-    size = (gray.shape[1], gray.shape[0])
-    mask = None
-    if box is not None:
-        mask = np.zeros(gray.shape, np.uint8)
-        x1, y1, x2, y2 = (int(round(v)) for v in box)
-        mask[y1:y2 + 1, x1:x2 + 1] = 255
-    refs = []
-    for view, f in detect_views(gray, detector, max_features, mask, tilts):
-        if view is None:
-            refs.append(Reference(brand, name, f, size, box))
-        elif len(f) >= min_features:
-            refs.append(Reference(brand, view_name(name, *view), f, size, box))
-    return refs
