@@ -22,6 +22,28 @@ def _sift_like(rng, n, d=128):
     return rng.integers(0, 256, (n, d)).astype(np.float32)
 
 
+def test_pairwise_products_on_one_blas_thread_are_the_same_and_the_thread_count_comes_back():
+    from threadpoolctl import threadpool_info
+
+    from cvpipe.panorama.match import one_blas_thread
+
+    def blas_threads():
+        return [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
+
+    rng = np.random.default_rng(1)
+    q, t = _sift_like(rng, 1500), _sift_like(rng, 1400)
+    before = blas_threads()
+    many = matching.nearest_two(q, t)
+    with one_blas_thread():
+        assert set(blas_threads()) == {1}
+        one = matching.nearest_two(q, t)
+    assert blas_threads() == before
+    # SIFT's integer-valued descriptors: every product and partial sum is exact in float32 (128 * 255^2 < 2^24),
+    # so however BLAS splits the sums over threads, the distances are the same bit for bit
+    for a, b in zip(many, one):
+        np.testing.assert_array_equal(a, b)
+
+
 @pytest.mark.parametrize("block", [matching.DISTANCE_BLOCK, 4000])
 def test_nearest_two_and_ratio_matches_equal_brute_force(block, monkeypatch):
     monkeypatch.setattr(matching, "DISTANCE_BLOCK", block)  # 4000 entries: the query in blocks of 10 rows
