@@ -36,9 +36,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--out", required=True, metavar="PANO.png", help="where to write the panorama")
     parser.add_argument("--preset", choices=PRESET_CHOICES, default=DEFAULT_PRESET,
                         help="'default': SIFT features, the lowest pairwise error and the most pairs found, about "
-                             "0.4-1.4x cv2.Stitcher's time (SIFT is half of it on large photos); use it when the "
+                             "0.3-1.4x cv2.Stitcher's time (SIFT is half of it on large photos); use it when the "
                              "photos overlap little or the panorama is the end product. 'fast': ORB features with "
-                             "each pair refitted to Lucas-Kanade tracks, about 0.3-0.65x cv2.Stitcher's time and a "
+                             "each pair refitted to Lucas-Kanade tracks, about 0.2-0.7x cv2.Stitcher's time and a "
                              "lower ground-truth error than cv2.Stitcher on every set we measured; use it for "
                              "previews, many photos or many sets. --detector, --max-features and --pair-refine given "
                              "with a preset win over it (default %(default)s)")

@@ -2,11 +2,11 @@
 (``cvpipe stitch --preset``, ``cvpipe bench panorama --preset``, the guard's rows).
 
 * ``default``: the sections' own defaults (``params.yaml``): SIFT features, each pair refitted on its inliers.
-  The lowest pairwise error; 0.4-1.4x cv2.Stitcher's time (SIFT is half of it on large photos).
+  The lowest pairwise error; 0.3-1.4x cv2.Stitcher's time (SIFT is half of it on large photos).
 * ``fast``: ORB features (1500 per image, binary, about 10x cheaper to find than SIFT; with 1000, two of
   halfdome-14's views lost their link to the others), each accepted pair's homography fitted again to Lucas-Kanade
   tracks of corners in its overlap (:mod:`cvpipe.panorama.track`), which gives back most of the accuracy that ORB's
-  coarse keypoints lose. 0.3-0.65x cv2.Stitcher's time, and a lower ground-truth error than cv2.Stitcher on every
+  coarse keypoints lose. 0.2-0.7x cv2.Stitcher's time, and a lower ground-truth error than cv2.Stitcher on every
   set with ground truth measured; ORB finds fewer of the weak pairs (little overlap) than SIFT.
 
 Measurements: docs/notes/panorama.md.
