@@ -215,7 +215,7 @@ def test_multiband_on_crops_in_threads_gives_the_whole_boxes_one_at_a_time(monke
     monkeypatch.setattr(blend, "BLEND_THREADS", 1)
     assert np.array_equal(panorama.blend_multiband(w, labels, 4, gains), pano)  # added in image order either way
     # the plain computation: every image's pyramid over its whole padded box
-    monkeypatch.setattr(blend, "_reach_of_own", lambda labels, k, corner, shape, box, P: box)
+    monkeypatch.setattr(blend, "_reach_of_own", lambda own, corner, box, P: box)
     whole = panorama.blend_multiband(w, labels, 4, gains)
     # the crop's border reflection stays outside what is read: float rounding only (1 grey level, rarely)
     d = np.abs(whole.astype(int) - pano)

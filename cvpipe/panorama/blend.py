@@ -269,17 +269,17 @@ def _three(a: np.ndarray) -> np.ndarray:
 BLEND_THREADS = 2
 
 
-def _reach_of_own(labels: np.ndarray, k: int, corner: tuple[int, int], shape: tuple[int, int],
-                  box: tuple[int, int, int, int], P: int) -> tuple[int, int, int, int] | None:
-    """The part of image ``k``'s padded box (canvas pixels, multiples of ``P``) that its pyramid needs: the box of
-    the pixels the seams gave it, grown by ``2 * P``, or None when it has none.
+def _reach_of_own(own: np.ndarray, corner: tuple[int, int], box: tuple[int, int, int, int],
+                  P: int) -> tuple[int, int, int, int] | None:
+    """The part of an image's padded box (canvas pixels, multiples of ``P``) that its pyramid needs: the box of
+    the pixels the seams gave it (``own``, over the image's own box at ``corner``), grown by ``2 * P``, or None when
+    it has none.
 
     A level-l weight spreads about ``2**(l+1)`` pixels beyond the own pixels, and the Laplacian there reads about as
     far again: ``2 * P`` (``P = 2**bands``) covers both at the coarsest level, so every value the blend uses is the
     one the whole box gives (the crop's border reflection stays outside what is read; tested against the whole box).
     """
     x, y = corner
-    own = labels[y:y + shape[0], x:x + shape[1]] == k
     rows, cols = np.flatnonzero(own.any(1)), np.flatnonzero(own.any(0))
     if len(rows) == 0:
         return None
@@ -301,9 +301,10 @@ def _level0_laplacian(norm: np.ndarray, nxt: np.ndarray, sl: tuple[slice, slice]
     return cv2.subtract(norm[sl], up)
 
 
-def _image_share(w: Warped, labels: np.ndarray, k: int, crop: tuple[int, int, int, int], bands: int,
+def _image_share(w: Warped, own_box: np.ndarray, k: int, crop: tuple[int, int, int, int], bands: int,
                  gain: np.ndarray) -> tuple:
-    """Image ``k``'s part of the multiband blend over ``crop`` (canvas pixels, from :func:`_reach_of_own`).
+    """Image ``k``'s part of the multiband blend over ``crop`` (canvas pixels, from :func:`_reach_of_own`);
+    ``own_box``: which pixels of its box the seams gave it.
 
     Returns ``(crop, sl, own, lap0, coarse)``: the crop, the image's pixels in it ``sl``, which of them it owns, the
     level-0 Laplacian there (copied where it owns) and, per coarser level, the Laplacian times the blurred seam
@@ -321,7 +322,7 @@ def _image_share(w: Warped, labels: np.ndarray, k: int, crop: tuple[int, int, in
     # warped images are 0 outside their mask, so image * mask is the gained image itself
     np.multiply(im, gain[isl] if gain.ndim == 3 else gain, out=sub[sl], casting="unsafe")
     m[sl] = mask[isl] > 0
-    own = labels[iy0:iy1, ix0:ix1] == k
+    own = own_box[iy0 - y:iy1 - y, ix0 - x:ix1 - x]
     # level 0 copies `own` pixels; only the coarser levels need the float weight, so level 0's is built, shrunk
     # and dropped before the first Laplacian level exists (memory: the full-size box arrays are the peak)
     weight = np.zeros_like(m)
@@ -408,14 +409,15 @@ def blend_multiband(w: Warped, labels: np.ndarray, bands: int, gains=None) -> np
     room = max((b[2] - b[0]) * (b[3] - b[1]) for b in boxes)
     pending: deque = deque()  # (future, crop pixels)
     with ThreadPoolExecutor(BLEND_THREADS) as pool:
-        for k, (mask, corner, box) in enumerate(zip(w.masks, w.corners, boxes)):
-            crop = _reach_of_own(labels, k, corner, mask.shape, box, P)
+        for k, (mask, (x, y), box) in enumerate(zip(w.masks, w.corners, boxes)):
+            own = labels[y:y + mask.shape[0], x:x + mask.shape[1]] == k
+            crop = _reach_of_own(own, (x, y), box, P)
             if crop is None:  # the seams gave this image no pixel: it adds nothing at any level
                 continue
             area = (crop[2] - crop[0]) * (crop[3] - crop[1])
             while pending and (len(pending) >= BLEND_THREADS or sum(a for _, a in pending) + area > room):
                 add(pending.popleft()[0].result())
-            pending.append((pool.submit(_image_share, w, labels, k, crop, bands, _gain_of(g, k)), area))
+            pending.append((pool.submit(_image_share, w, own, k, crop, bands, _gain_of(g, k)), area))
         while pending:
             add(pending.popleft()[0].result())
     out = None
@@ -477,12 +479,18 @@ def compose(w: Warped, blender: str, bands: int, gain: str = DEFAULT_GAIN, gain_
     seams : (H, W) bool
         Seam lines between the images' regions.
     """
+    pano, mask, seams, _ = _compose(w, blender, bands, gain, gain_block)
+    return pano, mask, seams
+
+
+def _compose(w: Warped, blender: str, bands: int, gain: str, gain_block: int) -> tuple:
+    """:func:`compose`, and the gains it applied (for :func:`blend_set`'s record)."""
     if blender not in BLENDERS:
         raise ValueError(f"`blender` must be one of {sorted(BLENDERS)}, got {blender!r}")
     gains = compensation_gains(w, gain, gain_block)
     labels = seam_labels(w)
     pano = BLENDERS[blender](w, labels, bands, gains)
-    return pano, labels >= 0, seam_lines(labels)
+    return pano, labels >= 0, seam_lines(labels), gains
 
 
 def blend_set(w: Warped, p) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict, float]:
@@ -506,9 +514,8 @@ def blend_set(w: Warped, p) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict, f
     import time
 
     t0 = time.perf_counter()
-    pano, mask, seams = compose(w, p.blender, p.bands, p.gain_compensation, p.gain_block)
+    pano, mask, seams, gains = _compose(w, p.blender, p.bands, p.gain_compensation, p.gain_block)
     seconds = time.perf_counter() - t0
-    gains = compensation_gains(w, p.gain_compensation, p.gain_block)
     gains = np.ones(len(w.images)) if gains is None else gains
     shown = gains if isinstance(gains, np.ndarray) else np.stack([g.reshape(-1, g.shape[2]).mean(0) for g in gains])
     record = {"ok": True, "gains": shown, "ghosting": overlap_difference(w, gains),
