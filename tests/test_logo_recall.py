@@ -272,4 +272,4 @@ def test_bench_per_brand_counts_the_answer_at_the_threshold(capsys):
     # the second "a" is below the threshold; the unknown-brand scene counts for no brand
     assert got == {"a": {"scenes": 2, "found": 1, "recall": 0.5}, "b": {"scenes": 1, "found": 0, "recall": 0.0}}
     _print_per_brand({"methods": {"fused": {"per_brand": got}}})
-    assert "fused    a 1/2, b 0/1" in capsys.readouterr().out
+    assert "fused       a 1/2, b 0/1" in capsys.readouterr().out

@@ -515,12 +515,9 @@ def test_cli_missing_gallery_folder(tmp_path, capsys):
     assert "gallery folder does not exist" in capsys.readouterr().err
 
 
-def test_leave_one_out_protocol(tmp_path, marks):
-    """Each boxed training photo is a scene twice: its brand must be found with the other photos of the brand in the
-    gallery, and none when its brand is left out of the gallery entirely."""
-    from cvpipe.bench.logo import run_leave_one_out
-    from cvpipe.params import LogoFeaturesParams
-
+def _loo_subset(tmp_path, marks) -> None:
+    """A five-photo subset in ``tmp_path`` (scenes.csv, scenes/, gallery/): two photos each of brand0 and brand1,
+    one of brand2, and a reference image of brand1."""
     (tmp_path / "scenes").mkdir()
     (tmp_path / "gallery").mkdir()
     rows = ["image,brand,gt_kind,x1,y1,x2,y2,img_w,img_h"]
@@ -535,6 +532,15 @@ def test_leave_one_out_protocol(tmp_path, marks):
         rows.append(f"scenes/{i}.jpg,{brand},bbox,{x1},{y1},{x2},{y2},640,480")
     (tmp_path / "scenes.csv").write_text("\n".join(rows) + "\n")
     cv2.imwrite(str(tmp_path / "gallery" / "brand1.png"), marks["brand1"])
+
+
+def test_leave_one_out_protocol(tmp_path, marks):
+    """Each boxed training photo is a scene twice: its brand must be found with the other photos of the brand in the
+    gallery, and none when its brand is left out of the gallery entirely."""
+    from cvpipe.bench.logo import run_leave_one_out
+    from cvpipe.params import LogoFeaturesParams
+
+    _loo_subset(tmp_path, marks)
     res = run_leave_one_out(tmp_path, ["sift"], LogoFeaturesParams(), LogoMatchParams(), LogoVerifyParams())
     ev = res["methods"]["sift"]
     assert res["protocol"]["photos"] == 5 and ev["scenes"] == 10 and ev["positives"] == 5
@@ -547,6 +553,20 @@ def test_leave_one_out_protocol(tmp_path, marks):
     # protocol's
     own = {d["scene"]: d["truth"] for d in detail if d["truth"]}
     assert all(d["best_brand"] != own[d["scene"]] for d in detail if d["truth"] is None)
+
+
+def test_leave_one_out_shape_row_follows_the_fused_answers(tmp_path, marks):
+    """The fused+shape row answers as fused wherever fused names a brand, and is calibrated without the photo."""
+    from cvpipe.bench.logo import SHAPE_ROW, run_leave_one_out
+    from cvpipe.params import LogoFeaturesParams
+
+    _loo_subset(tmp_path, marks)
+    res = run_leave_one_out(tmp_path, ["fused"], LogoFeaturesParams(), LogoMatchParams(), LogoVerifyParams())
+    fused, cue = res["methods"]["fused"]["scenes_detail"], res["methods"][SHAPE_ROW]["scenes_detail"]
+    assert [(d["scene"], d["truth"]) for d in fused] == [(d["scene"], d["truth"]) for d in cue]
+    assert all(c == f for f, c in zip(fused, cue) if f["brand"] is not None)
+    assert all(c["detector"] == "shape" for f, c in zip(fused, cue) if c != f)
+    assert res["protocol"]["shape"]["templates"] >= 0
 
 
 def test_fitter_follows_descriptor_kind(gallery, marks, monkeypatch):

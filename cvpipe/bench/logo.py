@@ -15,6 +15,12 @@ set's own labels.
 ``--protocol loo`` is the tuning protocol, which never looks at the test scenes: every boxed training photo is a
 scene twice, once against the gallery without that photo's own boxes (its brand is the answer) and once against the
 gallery without its brand at all (a logo of an unknown brand: the answer is none).
+
+Where ``fused`` is compared, the row ``fused+shape`` adds the shape cue of :mod:`cvpipe.logo.shape`: the fused
+answer, and on the scenes where it names no brand the brand of the silhouette that clears its chance level most,
+with that margin as its score (below the keypoint answers' scores, so it ranks after them). Its templates are cut
+from the gallery's references and calibrated on the boxed training photos (in ``loo`` without the photo under
+test); its time per scene is the fused method's plus the cue's where it runs.
 """
 
 from __future__ import annotations
@@ -46,6 +52,8 @@ SUBSET = "flickrlogos27_subset"
 #: the methods compared (each detector, and ``fused``: cvpipe.logo.METHODS), read from the params model (no cv2 for
 #: --help)
 METHODS = typing.get_args(LogoMethod)
+#: the row of the fused method followed by the shape cue where it names no brand (:mod:`cvpipe.logo.shape`)
+SHAPE_ROW = "fused+shape"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -182,8 +190,64 @@ def _shrink(gray: np.ndarray, scale: float) -> np.ndarray:
 
     if scale == 1.0:
         return gray
-    h, w = gray.shape
+    h, w = gray.shape[:2]
     return cv2.resize(gray, (max(1, round(w * scale)), max(1, round(h * scale))), interpolation=cv2.INTER_AREA)
+
+
+def _colour_reader(root: Path, scale: float = 1.0):
+    """``name -> BGR image`` of the subset, read once each and shrunk by ``scale``."""
+    from .. import io
+
+    cache: dict[str, np.ndarray] = {}
+
+    def read(name: str) -> np.ndarray:
+        if name not in cache:
+            cache[name] = _shrink(io.read_image(root / name), scale)
+        return cache[name]
+    return read
+
+
+def shape_templates(gallery_imgs: list, read) -> list:
+    """The shape templates of the gallery's references (:func:`cvpipe.logo.shape.shape_template`): a boxed training
+    photo's box, a reference image whole; a template cut from a photo has that photo as its source."""
+    from ..logo.shape import shape_template
+
+    out = []
+    for brand, name, _, box in gallery_imgs:
+        photo = name.split("[")[0] if box is not None else None
+        t = shape_template(read(photo or name), brand, name, box, source=photo)
+        if t is not None:
+            out.append(t)
+    return out
+
+
+def _training_photos(gallery_imgs: list, extra: dict[str, set[str]]) -> tuple[list[str], list[set[str]]]:
+    """The boxed training photos and the brands each shows (its boxes' brands and the documented corrections)."""
+    brands: dict[str, set[str]] = {}
+    for brand, name, _, box in gallery_imgs:
+        if box is not None:
+            photo = name.split("[")[0]
+            brands.setdefault(photo, set()).add(brand)
+    photos = sorted(brands)
+    return photos, [brands[p] | extra.get(p, set()) for p in photos]
+
+
+def with_shape(answer: dict, decision) -> dict:
+    """A fused answer (a benchmark row's scene record) with the shape cue's ``decision`` (``(brand, margin, i)`` of
+    :func:`cvpipe.logo.shape.decide_shape`, or None) where the fused method named no brand."""
+    if answer["brand"] is not None or decision is None:
+        return dict(answer)
+    brand, margin, _ = decision
+    return {**answer, "brand": brand, "best_brand": brand, "score": margin, "inliers": 0, "detector": "shape",
+            "found": [[brand, margin]]}
+
+
+def _shape_protocol(templates: list, thresholds: np.ndarray) -> dict:
+    import numpy as np
+
+    kept = [templates[i] for i in np.flatnonzero(~np.isnan(thresholds))]
+    return {"templates": len(templates), "kept": len(kept),
+            "kept_per_brand": {b: sum(t.brand == b for t in kept) for b in sorted({t.brand for t in kept})}}
 
 
 def _mask(shape: tuple[int, int], box: tuple | None) -> np.ndarray | None:
@@ -211,6 +275,7 @@ def run_benchmark(root: Path, methods: list[str], fp: LogoFeaturesParams, mp: Lo
     from tqdm import tqdm
     from .. import io, logo
     from ..features import detect
+    from ..logo import shape
 
     gallery_imgs, tests = load_subset(root, min_box)
     extra = load_extra_labels()
@@ -231,11 +296,25 @@ def run_benchmark(root: Path, methods: list[str], fp: LogoFeaturesParams, mp: Lo
         return logo.recognize_fused(galleries[m], feats, (g.shape[1], g.shape[0]), mp, vp, seed)
 
     scenes = [(f, b, _shrink(io.read_image(root / f, "gray"), scene_scale)) for f, b in tests]
+    rows = [*methods, SHAPE_ROW] if "fused" in methods else list(methods)
+    if SHAPE_ROW in rows:  # the shape cue's templates, calibrated on the boxed training photos
+        t0 = time.perf_counter()
+        read = _colour_reader(root)
+        templates = shape_templates(gallery_imgs, read)
+        photos, brands = _training_photos(gallery_imgs, extra)
+        thresholds = shape.calibrate_shapes(templates, shape.shape_scores(
+            templates, [shape.scene_regions(read(p)) for p in photos]), photos, brands)
+        kept = [i for i, th in enumerate(thresholds) if th == th]  # not NaN
+        kept_templates, kept_thresholds = [templates[i] for i in kept], thresholds[kept]
+        hues = {t.hue_bin for t in kept_templates}
+        gallery_time[SHAPE_ROW] = gallery_time["fused"] + time.perf_counter() - t0
+        read_scene = _colour_reader(root, scene_scale)
+        colour = {f: read_scene(f) for f, _, _ in scenes}
     # warm-up: one scene per method (FLANN, OpenCV thread pools, scipy imports)
     for m in methods:
         recognize(m, scenes[0][2])
-    times = {m: [] for m in methods}
-    answers = {m: [] for m in methods}
+    times = {m: [] for m in rows}
+    answers = {m: [] for m in rows}
     for f, brand, g in tqdm(scenes, desc="logo bench", disable=None):
         for m in methods:  # interleaved, so load changes on the shared machine hit every method alike
             t0 = time.perf_counter()
@@ -247,6 +326,15 @@ def run_benchmark(root: Path, methods: list[str], fp: LogoFeaturesParams, mp: Lo
                                "inliers": det.inliers, "detector": best.detector if best else None,
                                "truth_all": sorted(({brand} - {None}) | extra.get(f, set())),
                                "found": found_list(det, vp.score_threshold)})
+            if m == "fused" and SHAPE_ROW in rows:
+                t0 = time.perf_counter()
+                decision = None
+                if det.brand is None:
+                    regions = shape.scene_regions(colour[f], hues)
+                    decision = shape.decide_shape(kept_templates, kept_thresholds,
+                                                  [shape.shape_score(t, regions)[0] for t in kept_templates])
+                times[SHAPE_ROW].append(times["fused"][-1] + time.perf_counter() - t0)
+                answers[SHAPE_ROW].append(with_shape(answers["fused"][-1], decision))
     result = {"protocol": {"gallery_references": {m: sum(len(g.references) for g in galleries[m].values())
                                                   for m in methods},
                            "gallery_dropped": {m: sum(len(g.dropped) for g in galleries[m].values())
@@ -255,7 +343,9 @@ def run_benchmark(root: Path, methods: list[str], fp: LogoFeaturesParams, mp: Lo
                            "score_threshold": vp.score_threshold, "scene_scale": scene_scale,
                            "extra_score": extra_score, "extra_labels": _extra_count(extra)},
               "methods": {}}
-    for m in methods:
+    if SHAPE_ROW in rows:
+        result["protocol"]["shape"] = _shape_protocol(templates, thresholds)
+    for m in rows:
         a = answers[m]
         ev = logo.evaluate([x["truth"] for x in a], [x["best_brand"] for x in a], [x["score"] for x in a],
                             vp.score_threshold)
@@ -276,6 +366,7 @@ def run_leave_one_out(root: Path, methods: list[str], fp: LogoFeaturesParams, mp
     from tqdm import tqdm
     from .. import logo
     from ..features import detect
+    from ..logo import shape
 
     gallery_imgs, _ = load_subset(root, min_box)
     extra = load_extra_labels()
@@ -291,7 +382,15 @@ def run_leave_one_out(root: Path, methods: list[str], fp: LogoFeaturesParams, mp
     refs = {d: [(n.split("[")[0] if box is not None else None,
                  logo.Reference(b, n, detect(g, d, fp.max_features, _mask(g.shape, box)), (g.shape[1], g.shape[0]),
                                 box)) for b, n, g, box in gallery_imgs] for d in needed}
-    answers: dict[str, list[dict]] = {m: [] for m in methods}
+    rows = [*methods, SHAPE_ROW] if "fused" in methods else list(methods)
+    if SHAPE_ROW in rows:  # every template against every training photo once; each fold calibrates without its photo
+        read = _colour_reader(root)
+        templates = shape_templates(gallery_imgs, read)
+        names, brands = _training_photos(gallery_imgs, extra)
+        read_scene = _colour_reader(root, scene_scale)
+        scores = shape.shape_scores(templates, [shape.scene_regions(read_scene(p)) for p in names])
+        folds: list[dict] = []
+    answers: dict[str, list[dict]] = {m: [] for m in rows}
     for photo, (brand, gray) in tqdm(sorted(photos.items()), desc="loo", disable=None):
         small = _shrink(gray, scene_scale)
         size = (small.shape[1], small.shape[0])
@@ -313,7 +412,19 @@ def run_leave_one_out(root: Path, methods: list[str], fp: LogoFeaturesParams, mp
                                    "inliers": det.inliers, "detector": det.best.detector if det.best else None,
                                    "truth_all": sorted(truth_all & known),
                                    "found": found_list(det, vp.score_threshold)})
-    for m in methods:
+            if SHAPE_ROW in rows:
+                use = [i for i, t in enumerate(templates) if t.source != photo and (truth is not None or
+                                                                                    t.brand != brand)]
+                calib = [j for j, p in enumerate(names) if p != photo]
+                th = shape.calibrate_shapes([templates[i] for i in use], scores[np.ix_(use, calib)],
+                                            [names[j] for j in calib], [brands[j] for j in calib])
+                decision = shape.decide_shape([templates[i] for i in use], th, scores[use, names.index(photo)])
+                answers[SHAPE_ROW].append(with_shape(answers["fused"][-1], decision))
+                folds.append({"templates": len(use), "kept": int((th == th).sum())})
+    if SHAPE_ROW in rows:
+        result["protocol"]["shape"] = {"templates": len(templates),
+                                       "kept_per_fold_median": statistics.median(f["kept"] for f in folds)}
+    for m in rows:
         ev = logo.evaluate([x["truth"] for x in answers[m]], [x["best_brand"] for x in answers[m]],
                             [x["score"] for x in answers[m]], vp.score_threshold)
         _summarise(ev, answers[m], vp.score_threshold)
@@ -345,18 +456,18 @@ def _extra_count(extra: dict[str, set[str]]) -> int:
 def _print_per_brand(res: dict) -> None:
     print("recall per brand (found / scenes labelled with it):")
     for m, ev in res["methods"].items():
-        print(f"{m:8s} " + ", ".join(f"{b} {v['found']}/{v['scenes']}" for b, v in ev["per_brand"].items()))
+        print(f"{m:11s} " + ", ".join(f"{b} {v['found']}/{v['scenes']}" for b, v in ev["per_brand"].items()))
 
 
 def _print_several(res: dict) -> None:
     pr = res["protocol"]
     print(f"several brands per photo (labels plus {pr['extra_labels']} documented corrections, "
           f"{EXTRA_LABELS.name}; a later logo needs score >= {pr['extra_score']:g}):")
-    print(f"{'method':8s} {'1-brand P':>9s} {'1-brand R':>9s} {'every P':>8s} {'every R':>8s} {'found':>6s} "
+    print(f"{'method':11s} {'1-brand P':>9s} {'1-brand R':>9s} {'every P':>8s} {'every R':>8s} {'found':>6s} "
           f"{'right':>6s} {'true':>5s}")
     for m, ev in res["methods"].items():
         s = ev["several_brands"]
-        print(f"{m:8s} {s['one_brand_precision']:9.3f} {s['one_brand_recall']:9.3f} {s['precision']:8.3f} "
+        print(f"{m:11s} {s['one_brand_precision']:9.3f} {s['one_brand_recall']:9.3f} {s['precision']:8.3f} "
               f"{s['recall']:8.3f} {s['answered']:6d} {s['correct']:6d} {s['positives']:5d}")
 
 
@@ -393,9 +504,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"FlickrLogos-27 subset, leave-one-photo-out: {pr['photos']} training photos, each as a scene with its "
               f"brand and without it ({pr['scenes']} scenes), score threshold {pr['score_threshold']}, scenes "
               f"scaled by {pr['scene_scale']}")
-        print(f"{'method':8s} {'precision':>9s} {'recall':>7s} {'accuracy':>8s} {'R@P>=0.95':>9s}")
+        print(f"{'method':11s} {'precision':>9s} {'recall':>7s} {'accuracy':>8s} {'R@P>=0.95':>9s}")
         for m, ev in res["methods"].items():
-            print(f"{m:8s} {ev['precision']:9.3f} {ev['recall']:7.3f} {ev['accuracy']:8.3f} "
+            print(f"{m:11s} {ev['precision']:9.3f} {ev['recall']:7.3f} {ev['accuracy']:8.3f} "
                   f"{ev['best_recall_at_precision_0.95']:9.3f}")
         _print_per_brand(res)
         _print_several(res)
@@ -408,11 +519,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"FlickrLogos-27 subset: {pr['test_scenes']} test scenes ({pr['with_logo']} with a logo), gallery "
           f"{pr['gallery_references']} references, score threshold {pr['score_threshold']}, scenes scaled by "
           f"{pr['scene_scale']}")
-    print(f"{'method':8s} {'precision':>9s} {'recall':>7s} {'accuracy':>8s} {'P@R>=0.70':>9s} {'R@P>=0.95':>9s} "
+    print(f"{'method':11s} {'precision':>9s} {'recall':>7s} {'accuracy':>8s} {'P@R>=0.70':>9s} {'R@P>=0.95':>9s} "
           f"{'s/scene':>8s}")
     for m, ev in res["methods"].items():
         p70 = ev["best_precision_at_recall_0.70"]
-        print(f"{m:8s} {ev['precision']:9.3f} {ev['recall']:7.3f} {ev['accuracy']:8.3f} "
+        print(f"{m:11s} {ev['precision']:9.3f} {ev['recall']:7.3f} {ev['accuracy']:8.3f} "
               f"{'-' if p70 is None else f'{p70:.3f}':>9s} {ev['best_recall_at_precision_0.95']:9.3f} "
               f"{ev['time_per_scene_median_s']:8.3f}")
     _print_per_brand(res)

@@ -26,12 +26,17 @@ The steps take arrays: ``gallery`` (the index), ``match`` (tentative matches), `
 score), ``detect`` (the recipe: :func:`recognize`, :func:`every_logo`) and ``report`` (evaluation, stage records,
 pictures). :mod:`~cvpipe.logo.cached` reads the gallery and the scenes' features back from the features stage's
 folder for the stages; the command and the benchmark read their own image folders.
+
+:mod:`~cvpipe.logo.shape` is a cue of another kind for smooth marks that keypoints miss: the silhouette of a mark's
+main colour region, calibrated on photos without the brand (the logo benchmark's ``fused+shape`` row).
 """
 
 from .detect import DEFAULT_EXTRA_SCORE, MAX_OVERLAP, Detection, decide, every_logo, quad_iou, recognize, verify_scene
 from .fused import METHODS, method_detectors, recognize_fused, verify_fused, verify_method_scene
 from .gallery import Gallery, Reference, build_gallery
 from .match import Matches, match_item, match_scene
+from .shape import (ShapeTemplate, calibrate_shapes, decide_shape, scene_regions, shape_score, shape_scores,
+                    shape_template)
 from .report import (NO_TRUTH, brand_recall, confusion, draw_confusion, draw_detection, draw_missed, evaluate,
                      evaluate_records, found_counts, found_plot, missed_record, merge_dropped, metric_key, metrics_of, pick_method, pr_rows, quad_error,
                      report_summary, scene_record)
@@ -40,11 +45,13 @@ from .verify import (MODELS, Hypothesis, affine_ransac, fit_affine, map_poses, p
 
 __all__ = [
     "DEFAULT_EXTRA_SCORE", "MAX_OVERLAP", "METHODS", "MODELS", "NO_TRUTH", "Detection", "Gallery", "Hypothesis",
-    "Matches", "Reference",
-    "affine_ransac", "brand_recall", "build_gallery", "confusion", "decide", "draw_confusion", "draw_detection",
+    "Matches", "Reference", "ShapeTemplate",
+    "affine_ransac", "brand_recall", "build_gallery", "calibrate_shapes", "confusion", "decide", "decide_shape",
+    "draw_confusion", "draw_detection",
     "draw_missed", "evaluate", "evaluate_records", "every_logo", "fit_affine", "found_counts", "found_plot",
     "map_poses", "match_item", "match_scene", "merge_dropped", "method_detectors", "metric_key", "metrics_of",
     "missed_record", "pick_method", "pose_agrees", "pose_probability", "pr_rows", "quad_error", "quad_iou",
-    "recognize", "recognize_fused", "report_summary", "scene_record", "shape_problem", "significance",
+    "recognize", "recognize_fused", "report_summary", "scene_record", "scene_regions", "shape_problem",
+    "shape_score", "shape_scores", "shape_template", "significance",
     "tested_references", "verify", "verify_fused", "verify_method_scene", "verify_scene",
 ]
