@@ -62,7 +62,8 @@ class Reference:
 
 @dataclass(frozen=True, eq=False)
 class Gallery:
-    """The indexed gallery: stacked descriptors of every usable reference and a matcher trained on them.
+    """The indexed gallery: stacked descriptors of every usable reference and their index: for float descriptors a
+    FLANN matcher trained on them, for binary ones the descriptors as rows of 8-byte words, searched exactly.
 
     Attributes
     ----------
@@ -80,6 +81,11 @@ class Gallery:
         Keypoint index inside its reference of every stacked descriptor.
     brand_of_ref : (R,) int64
         Index into ``brands`` of every reference.
+    matcher : cv2.DescriptorMatcher or None
+        The FLANN index of float descriptors (None for binary ones).
+    words : (M, W) uint64 or None
+        Binary descriptors zero-padded to ``W`` whole 8-byte words (None for float ones): the Hamming distance of
+        two rows is the sum of their words' bit counts (:func:`cvpipe.logo.match.match_scene`).
     """
 
     detector: str
@@ -89,7 +95,8 @@ class Gallery:
     ref_of: np.ndarray
     local_of: np.ndarray
     brand_of_ref: np.ndarray
-    matcher: cv2.DescriptorMatcher = field(repr=False)
+    matcher: cv2.DescriptorMatcher | None = field(repr=False)
+    words: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def binary(self) -> bool:
@@ -116,6 +123,13 @@ def _prepare(desc: np.ndarray, binary: bool) -> np.ndarray:
     d = np.asarray(desc, np.float32)
     d = d / (np.abs(d).sum(axis=1, keepdims=True) + 1e-7)
     return np.ascontiguousarray(np.sqrt(np.maximum(d, 0)), np.float32)
+
+
+def binary_words(desc: np.ndarray) -> np.ndarray:
+    """Binary descriptors (N, L) uint8 as (N, ceil(L / 8)) uint64 rows, zero-padded (no bit is added, so Hamming
+    distances are unchanged)."""
+    d = np.ascontiguousarray(desc, np.uint8)
+    return np.ascontiguousarray(np.pad(d, ((0, 0), (0, -d.shape[1] % 8)))).view(np.uint64)
 
 
 def _strongest(f: Features, n: int) -> Features:
@@ -227,16 +241,18 @@ def build_gallery(references: Sequence[Reference], min_features: int = _MATCH.mi
     desc = np.concatenate([_prepare(r.features.descriptors, binary) for r in usable])
     ref_of = np.concatenate([np.full(len(r.features), i, np.int64) for i, r in enumerate(usable)])
     local_of = np.concatenate([np.arange(len(r.features), dtype=np.int64) for r in usable])
+    matcher, words = None, None
     if binary:
-        matcher = cv2.BFMatcher(cv2.NORM_HAMMING)
+        words = binary_words(desc)
     else:
         matcher = flann_matcher()
-    matcher.add([desc])
-    # FLANN's randomised kd-trees draw from OpenCV's global generator: seeding it here makes the index (and so every
-    # answer) a function of the gallery alone, not of whatever ran before in the process (this resets cv2's RNG)
-    cv2.setRNGSeed(0)
-    matcher.train()
+        matcher.add([desc])
+        # FLANN's randomised kd-trees draw from OpenCV's global generator: seeding it here makes the index (and so
+        # every answer) a function of the gallery alone, not of whatever ran before in the process (this resets
+        # cv2's RNG)
+        cv2.setRNGSeed(0)
+        matcher.train()
     brand_of_ref = np.array([brands.index(r.brand) for r in usable], np.int64)
     # mapping the references of one brand into a shared frame and verifying them as one model was measured and
     # rejected (no gain on FlickrLogos: docs/notes/logo.md); every reference is verified on its own
-    return Gallery(detector, brands, tuple(usable), dropped, ref_of, local_of, brand_of_ref, matcher)
+    return Gallery(detector, brands, tuple(usable), dropped, ref_of, local_of, brand_of_ref, matcher, words)

@@ -8,7 +8,9 @@ import numpy as np
 
 from ..features import Features
 from ..params import LogoMatchParams
-from .gallery import Gallery, _prepare
+from .._threads import max_threads
+from ._hamming import hamming_k_nearest
+from .gallery import Gallery, _prepare, binary_words
 
 
 @dataclass(frozen=True)
@@ -51,7 +53,8 @@ class Matches:
 def match_scene(gallery: Gallery, scene: Features, params: LogoMatchParams | None = None) -> Matches:
     """Tentative matches of a scene's keypoints to every reference.
 
-    Each scene descriptor gets its ``k`` nearest gallery descriptors. A neighbour of brand B is kept when its
+    Each scene descriptor gets its ``k`` nearest gallery descriptors (an exact search of binary descriptors, FLANN's
+    approximate one of float descriptors). A neighbour of brand B is kept when its
     distance is below ``ratio`` times the distance of the nearest neighbour of any other brand (or of the k-th
     neighbour when all k belong to B), and at most the first ``per_reference`` neighbours in one reference count.
     Afterwards every reference keypoint keeps only its closest scene keypoint.
@@ -72,14 +75,19 @@ def match_scene(gallery: Gallery, scene: Features, params: LogoMatchParams | Non
     if len(scene) == 0:
         return empty
     k = int(min(p.k, len(gallery.ref_of)))
-    knn = gallery.matcher.knnMatch(_prepare(scene.descriptors, gallery.binary), k=k)
-    n = len(knn)
-    idx = np.full((n, k), -1, np.int64)
-    dist = np.full((n, k), np.inf, np.float32)
-    for i, row in enumerate(knn):
-        for j, m in enumerate(row):
-            idx[i, j] = m.trainIdx
-            dist[i, j] = m.distance
+    if gallery.binary:  # exact search, the queries over the kernels' threads (the same neighbours as cv2.BFMatcher)
+        d, i = hamming_k_nearest(binary_words(scene.descriptors), gallery.words, k, max_threads())
+        idx, dist = i.astype(np.int64), np.where(i >= 0, d, np.inf).astype(np.float32)
+        n = len(idx)
+    else:
+        knn = gallery.matcher.knnMatch(_prepare(scene.descriptors, gallery.binary), k=k)
+        n = len(knn)
+        idx = np.full((n, k), -1, np.int64)
+        dist = np.full((n, k), np.inf, np.float32)
+        for i, row in enumerate(knn):
+            for j, m in enumerate(row):
+                idx[i, j] = m.trainIdx
+                dist[i, j] = m.distance
     valid = idx >= 0
     ref = np.where(valid, gallery.ref_of[np.maximum(idx, 0)], -1)
     brand = np.where(valid, gallery.brand_of_ref[np.maximum(ref, 0)], -1)
