@@ -120,3 +120,78 @@ def test_gallery_arches_find_the_boxed_arches_of_a_photo():
     iou = inter / (w * h + (x1 - x0) * (y1 - y0) - inter)
     # the silhouette lies inside the annotated box, which has a margin round the arches
     assert iou > 0.6 and score > 0.5, (iou, score)
+
+
+def _cli_gallery(tmp_path, rng) -> Path:
+    """A gallery of one brand, "Arches": the M of arches above a grey textured strip that gives SIFT keypoints."""
+    g = tmp_path / "gallery"
+    g.mkdir()
+    ref = np.full((200, 160, 3), 255, np.uint8)
+    ref[:120] = _arches(160, 120, 18)
+    strip = cv2.GaussianBlur(rng.integers(0, 256, (80, 160, 1)).astype(np.uint8), (0, 0), 1.5)
+    ref[120:] = cv2.cvtColor(strip, cv2.COLOR_GRAY2BGR)
+    cv2.imwrite(str(g / "Arches.png"), ref)
+    return g
+
+
+def _clutter(rng) -> np.ndarray:
+    return cv2.cvtColor(cv2.GaussianBlur(rng.integers(60, 200, (300, 400, 1)).astype(np.uint8), (0, 0), 3),
+                        cv2.COLOR_GRAY2BGR)
+
+
+def _shape_photos(tmp_path, rng) -> Path:
+    """Two photos of the arches (other scales and places) and two without them but with yellow blobs."""
+    d = tmp_path / "photos"
+    (d / "Arches").mkdir(parents=True)
+    (d / "none").mkdir()
+    for k, (scale, at) in enumerate(((0.8, (150, 110)), (1.0, (130, 90)))):  # clear of _scene's blobs
+        cv2.imwrite(str(d / "Arches" / f"{k}.png"), _scene(rng, at, scale)[0])
+    for k in range(2):
+        img = _clutter(rng)
+        cv2.rectangle(img, (30 + 40 * k, 40), (200, 120 + 30 * k), YELLOW, -1)
+        cv2.circle(img, (300, 200), 40 - 10 * k, YELLOW, -1)
+        cv2.imwrite(str(d / "none" / f"{k}.png"), img)
+    return d
+
+
+def test_command_names_the_smooth_mark_that_keypoints_miss_with_shape_photos(tmp_path, capsys):
+    import json
+
+    from cvpipe import cli
+
+    rng = np.random.default_rng(3)
+    gallery, photos = _cli_gallery(tmp_path, rng), _shape_photos(tmp_path, rng)
+    scene, (x, y, w, h) = _scene(rng, (120, 90), 0.7)  # the arches alone: the textured strip is not in the scene
+    cv2.imwrite(str(tmp_path / "scene.png"), scene)
+    plain = _clutter(rng)
+    cv2.rectangle(plain, (20, 20), (160, 100), YELLOW, -1)  # yellow, but no arches
+    cv2.imwrite(str(tmp_path / "plain.png"), plain)
+    argv = ["logo", str(tmp_path / "scene.png"), str(tmp_path / "plain.png"), "--gallery", str(gallery), "--json"]
+    assert cli.main(argv) == 0
+    assert [r["brand"] for r in json.loads(capsys.readouterr().out)] == [None, None]  # no keypoint fit either way
+    assert cli.main([*argv, "--shape-photos", str(photos)]) == 0
+    out = capsys.readouterr()
+    found, none = json.loads(out.out)
+    assert "shape cue: 1 of 1 gallery silhouettes kept (Arches)" in out.err
+    assert (found["brand"], found["cue"]) == ("Arches", "shape") and found["shape_margin"] > 0.3
+    (x0, y0), (x1, y1) = found["quad"][0], found["quad"][2]
+    assert abs(x0 - x) <= 3 and abs(y0 - y) <= 3 and abs(x1 - (x + w)) <= 4 and abs(y1 - (y + h)) <= 4
+    assert none["brand"] is None and "cue" not in none
+
+
+def test_command_refuses_shape_photos_it_cannot_use(tmp_path, capsys):
+    from cvpipe import cli
+
+    rng = np.random.default_rng(4)
+    gallery = _cli_gallery(tmp_path, rng)
+    cv2.imwrite(str(tmp_path / "scene.png"), _clutter(rng))
+    argv = ["logo", str(tmp_path / "scene.png"), "--gallery", str(gallery), "--shape-photos"]
+    assert cli.main([*argv, str(tmp_path / "nope")]) == 2
+    assert "nope: --shape-photos folder does not exist" in capsys.readouterr().err
+    (tmp_path / "photos" / "Unknown").mkdir(parents=True)
+    assert cli.main([*argv, str(tmp_path / "photos")]) == 2
+    err = capsys.readouterr().err
+    assert "Unknown: --shape-photos subfolders must be gallery brands or 'none'; the gallery has Arches" in err
+    (tmp_path / "empty" / "none").mkdir(parents=True)
+    assert cli.main([*argv, str(tmp_path / "empty")]) == 2
+    assert "empty: no photos; expected" in capsys.readouterr().err

@@ -7,7 +7,7 @@ import math
 import sys
 import typing
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Sequence
 
 from ..params import HomographyEstimateParams, LogoFeaturesParams, LogoMatchParams, LogoMethod, LogoVerifyParams
 from . import (DETECTORS, add_feature_arguments, add_result_arguments, final_output,  # noqa: F401
@@ -15,6 +15,8 @@ from . import (DETECTORS, add_feature_arguments, add_result_arguments, final_out
                step)  # DETECTORS: the ``--method`` choices (a test keeps them equal)
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from .. import logo
 
 HELP = "recognise gallery logos in scene photos (brand or none, and the logo outline)"
@@ -116,6 +118,79 @@ def note_unused(refs: list[logo.Reference], gallery: logo.Gallery, blank: dict[s
             note(f"note: gallery brand {brand!r} is not used: " + "; ".join(f"{n}: {r}" for n, r in items))
 
 
+#: the subfolder of ``--shape-photos`` that holds photos without any gallery brand
+NO_BRAND_FOLDER = "none"
+
+
+def shape_photo_files(folder: str | Path, brands: Sequence[str]) -> list[tuple[set[str], Path]]:
+    """``(brands shown, file)`` of every photo of ``--shape-photos``: ``DIR/<brand>/*.<ext>`` (a gallery brand) and
+    ``DIR/none/*.<ext>`` (none of them).
+
+    Raises
+    ------
+    InputError
+        The folder does not exist, a subfolder is neither a gallery brand nor ``none``, or no photo is found.
+    """
+    from .. import io
+    from ..errors import InputError
+
+    root = Path(folder)
+    if not root.is_dir():
+        raise InputError(f"{root}: --shape-photos folder does not exist")
+    out = []
+    for sub in sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")):
+        if sub.name != NO_BRAND_FOLDER and sub.name not in brands:
+            raise InputError(f"{sub}: --shape-photos subfolders must be gallery brands or {NO_BRAND_FOLDER!r}; "
+                             f"the gallery has {', '.join(sorted(brands))}")
+        shown = set() if sub.name == NO_BRAND_FOLDER else {sub.name}
+        out += [(shown, f) for f in io.list_images(sub)]
+    if not out:
+        raise InputError(f"{root}: no photos; expected {root}/<brand>/*.jpg (photos showing that gallery brand) and "
+                         f"{root}/{NO_BRAND_FOLDER}/*.jpg (photos without any)")
+    return out
+
+
+def shape_cue(gallery: str | Path, photos: str | Path) -> tuple[list, np.ndarray]:
+    """The gallery's silhouettes (:func:`cvpipe.logo.shape.shape_template`, one per gallery image) calibrated on the
+    labelled photos of ``photos`` (:func:`shape_photo_files`); returns the kept templates and their thresholds."""
+    import numpy as np
+
+    from .. import io
+    from ..logo import shape
+
+    files = gallery_files(gallery)
+    templates = [t for t in (shape.shape_template(io.read_image(f), b, str(f)) for b, f in files) if t is not None]
+    labelled = shape_photo_files(photos, sorted({b for b, _ in files}))
+    regions = [shape.scene_regions(io.read_image(f)) for _, f in progress(labelled, "shape photos")]
+    thresholds = shape.calibrate_shapes(templates, shape.shape_scores(templates, regions),
+                                        [str(f) for _, f in labelled], [b for b, _ in labelled])
+    kept = [i for i, th in enumerate(thresholds) if th == th]  # not NaN
+    if kept:
+        note(f"note: shape cue: {len(kept)} of {len(templates)} gallery silhouettes kept ("
+             + ", ".join(sorted({templates[i].brand for i in kept})) + ")")
+    else:
+        note(f"note: shape cue: none of the {len(templates)} gallery silhouettes is kept (each is a plain blob or "
+             f"finds its brand on no photo of {photos} above its level on the other photos): it will name no brand")
+    return [templates[i] for i in kept], np.asarray(thresholds)[kept]
+
+
+def _shape_answer(scene: str, shapes: tuple) -> tuple[str, float, list] | None:
+    """The shape cue's brand, margin and outline (the region's box) for the scene photo at ``scene``, or None."""
+    from .. import io
+    from ..logo import shape
+
+    templates, thresholds = shapes
+    if not templates:
+        return None
+    regions = shape.scene_regions(io.read_image(scene), {t.hue_bin for t in templates})
+    decision = shape.decide_shape(templates, thresholds, [shape.shape_score(t, regions)[0] for t in templates])
+    if decision is None:
+        return None
+    brand, margin, i = decision
+    x, y, w, h = shape.shape_score(templates[i], regions)[1]
+    return brand, margin, [[x, y], [x + w, y], [x + w, y + h], [x, y + h]]
+
+
 def recognize_scene(item: tuple, shared: tuple) -> tuple[dict, list, list]:
     """Recognise one scene, an item of :func:`cvpipe.compute.map_items` (runs on a worker).
 
@@ -124,9 +199,10 @@ def recognize_scene(item: tuple, shared: tuple) -> tuple[dict, list, list]:
     item : tuple
         ``(scene name, gray image or None, read error or None)`` from :func:`cvpipe.commands.read_images`.
     shared : tuple
-        ``({detector: Gallery}, max_features, min_long_side, LogoMatchParams, LogoVerifyParams, seed)``: the
-        galleries of the method's detectors; a gallery travels to a worker as its references and is indexed again
-        there (:class:`cvpipe.logo.Gallery`).
+        ``({detector: Gallery}, max_features, min_long_side, LogoMatchParams, LogoVerifyParams, seed, shapes)``: the
+        galleries of the method's detectors (a gallery travels to a worker as its references and is indexed again
+        there, :class:`cvpipe.logo.Gallery`) and :func:`shape_cue`'s templates and thresholds, or None: where the
+        method names no brand, the shape cue's answer (the scene is read again in colour).
 
     Returns
     -------
@@ -135,18 +211,26 @@ def recognize_scene(item: tuple, shared: tuple) -> tuple[dict, list, list]:
     quads, labels : list
         The outline and the label of every logo found, best first, for the overlay.
     """
+    import numpy as np
+
     from .. import logo
     from ..features import detect
 
     scene, gray, error = item
     if error is not None:
         raise error
-    galleries, max_features, min_long_side, mp, vp, seed = shared
+    galleries, max_features, min_long_side, mp, vp, seed, shapes = shared
     scenes = {d: detect(gray, d, max_features, min_long_side=min_long_side) for d in galleries}
     det = logo.recognize_fused(galleries, scenes, (gray.shape[1], gray.shape[0]), mp, vp, seed)
     found = logo.every_logo(det, vp.score_threshold)
-    return (detection_json(scene, det, found), [h.quad for h in found],
-            [f"{h.brand} ({h.score:.0f})" for h in found])
+    record = detection_json(scene, det, found)
+    if det.brand is None and shapes is not None and (cue := _shape_answer(scene, shapes)) is not None:
+        brand, margin, quad = cue
+        shown = {"brand": brand, "score": None, "inliers": 0, "quad": quad, "cue": "shape",
+                 "shape_margin": round(margin, 3)}
+        record.update({k: shown[k] for k in ("brand", "quad", "cue", "shape_margin")}, logos=[shown])
+        return record, [np.array(quad, float)], [f"{brand} (shape)"]
+    return record, [h.quad for h in found], [f"{h.brand} ({h.score:.0f})" for h in found]
 
 
 def _logo_json(h) -> dict:
@@ -177,9 +261,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     # a RANSAC seed, as homography.estimate.seed (every seed field is a params.Seed)
     parser.add_argument("--seed", type=param_type(HomographyEstimateParams, "seed"), default=0,
                         help="RANSAC seed (default 0)")
+    parser.add_argument("--shape-photos", metavar="DIR",
+                        help="labelled photos that calibrate the shape cue for smooth marks (a gallery image's "
+                             f"colour silhouette): DIR/<brand>/*.jpg show that gallery brand, DIR/{NO_BRAND_FOLDER}/"
+                             "*.jpg none; where the method names no brand, a scene gets the brand whose silhouette "
+                             "clears its level on these photos (docs/logo.md)")
     add_result_arguments(parser, "write the scene with each found logo outlined and named", items="scenes",
                          suffix=SUFFIX, json='print a JSON list, one record per scene ({"scene", "brand", "inliers", '
-                                             '"score", "quad", "logos": [every brand found, best first], "overlay"})')
+                                             '"score", "quad", "logos": [every brand found, best first], "overlay"; '
+                                             '"cue": "shape" and "shape_margin" when the shape cue named the brand})')
 
 
 def run(args: argparse.Namespace) -> int:
@@ -204,8 +294,12 @@ def run(args: argparse.Namespace) -> int:
             refs, blank = gallery_references(args.gallery, d, args.max_features)
             galleries[d] = logo.build_gallery(refs, mp.min_features, mp.reference_features)
         note_unused(refs, galleries[d], blank, mp.min_features)
+    shapes = None
+    if args.shape_photos:
+        with step("shape cue"):
+            shapes = shape_cue(args.gallery, args.shape_photos)
     records, failed = [], 0
-    shared = (galleries, args.max_features, args.min_long_side, mp, vp, args.seed)
+    shared = (galleries, args.max_features, args.min_long_side, mp, vp, args.seed, shapes)
     scenes = read_images(args.scenes, "gray", named=True)
     items = map_items(recognize_scene, scenes, shared=shared, scheduler=scheduler,
                       total=len(args.scenes))
@@ -239,6 +333,8 @@ def run(args: argparse.Namespace) -> int:
                 print(f"{r['scene']}: error")
             elif r["brand"] is None:
                 print(f"{r['scene']}: none")
+            elif r.get("cue") == "shape":
+                print(f"{r['scene']}: {r['brand']} (shape cue, margin {r['shape_margin']})")
             else:
                 print(f"{r['scene']}: {r['brand']} (score {r['score']}, {r['inliers']} inliers)")
     return 2 if failed else 0
