@@ -183,11 +183,12 @@ def _shape_answer(scene: str, shapes: tuple) -> tuple[str, float, list] | None:
     if not templates:
         return None
     regions = shape.scene_regions(io.read_image(scene), {t.hue_bin for t in templates})
-    decision = shape.decide_shape(templates, thresholds, [shape.shape_score(t, regions)[0] for t in templates])
+    scored = [shape.shape_score(t, regions) for t in templates]  # (score, box) each
+    decision = shape.decide_shape(templates, thresholds, [score for score, _ in scored])
     if decision is None:
         return None
     brand, margin, i = decision
-    x, y, w, h = shape.shape_score(templates[i], regions)[1]
+    x, y, w, h = scored[i][1]
     return brand, margin, [[x, y], [x + w, y], [x + w, y + h], [x, y + h]]
 
 
