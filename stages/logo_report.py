@@ -31,7 +31,7 @@ def logo_report(st: Stage) -> None:
         io.save_picture(out / f"confusion_{m}.png", img)
         pictures.append({"path": (out / f"confusion_{m}.png").as_posix(), "caption": f"{m}: confusion matrix on "
                          f"the {len(lab)} scenes with ground truth (rows = truth, columns = decision, last = none)"})
-    best = logo.pick_method(decisions, vp.score_threshold, st.sections["logo.features"].detector)
+    best = logo.pick_method(decisions, vp.score_threshold, st.sections["logo.report"].method)
     recs = decisions[best]
     shown = [r for r in recs if r["brand"]][:MAX_FOUND]
     shown += [r for r in recs if r["labelled"] and r["best_brand"] and r["truth"] != r["brand"]
@@ -70,7 +70,7 @@ def logo_report(st: Stage) -> None:
 
 
 if __name__ == "__main__":
-    run(logo_report, section=["logo.verify", "logo.features"],
+    run(logo_report, section=["logo.verify", "logo.report"],
         args={"images": "the logo.data folder", "verify": "folder of the logo_verify@det outputs",
               "methods": "+detectors, one logo_verify output folder each", "out": "folder for the pictures",
               "summary": "summary JSON for the report page", "found": "found-per-brand rows for dvc plots"})

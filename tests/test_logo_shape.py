@@ -84,6 +84,10 @@ def test_calibration_keeps_a_template_only_above_its_chance_level_and_refuses_bl
     assert shape.calibrate_shapes(templates, scores, photos, brands, margin=0.04)[1] == pytest.approx(0.45)
     with pytest.raises(ValueError, match="`scores`"):
         shape.calibrate_shapes(templates, scores[:, :3], photos, brands)
+    kept, levels = shape.kept_shapes(templates, th)
+    assert [t.brand for t in kept] == ["A"] and levels.tolist() == pytest.approx([0.35])
+    with pytest.raises(ValueError, match="`thresholds`"):
+        shape.kept_shapes(templates, th[:2])
 
 
 def test_decision_takes_the_largest_margin_above_the_minimum():

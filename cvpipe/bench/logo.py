@@ -243,9 +243,9 @@ def with_shape(answer: dict, decision) -> dict:
 
 
 def _shape_protocol(templates: list, thresholds: np.ndarray) -> dict:
-    import numpy as np
+    from ..logo import kept_shapes
 
-    kept = [templates[i] for i in np.flatnonzero(~np.isnan(thresholds))]
+    kept, _ = kept_shapes(templates, thresholds)
     return {"templates": len(templates), "kept": len(kept),
             "kept_per_brand": {b: sum(t.brand == b for t in kept) for b in sorted({t.brand for t in kept})}}
 

@@ -104,14 +104,14 @@ DETECTORS = ("akaze", "brisk", "orb", "sift")
 
 
 def add_feature_arguments(parser, detector: str, max_features: int, ratio: float, flag: str = "--detector",
-                          choices: tuple[str, ...] = DETECTORS) -> None:
-    """``--detector`` (or ``flag``, whose ``choices`` default to :data:`DETECTORS`), ``--max-features`` and
-    ``--ratio``, with the defaults of the command's parameter sections, the numbers checked by the fields they set
-    (:func:`param_type`)."""
+                          choices: tuple[str, ...] = DETECTORS, what: str = "keypoint detector") -> None:
+    """``--detector`` (or ``flag``, whose ``choices`` default to :data:`DETECTORS`, its help ``what``),
+    ``--max-features`` and ``--ratio``, with the defaults of the command's parameter sections, the numbers checked by
+    the fields they set (:func:`param_type`)."""
     from ..params import FeaturesParams, MatchParams
 
     parser.add_argument(flag, dest=flag.lstrip("-").replace("-", "_"), type=str.lower, choices=choices,
-                        default=detector, help=f"keypoint detector (default {detector})")
+                        default=detector, help=f"{what} (default {detector})")
     parser.add_argument("--max-features", type=param_type(FeaturesParams, "max_features"), default=max_features,
                         help=f"keypoints per image (default {max_features})")
     parser.add_argument("--ratio", type=param_type(MatchParams, "ratio"), default=ratio,

@@ -35,8 +35,8 @@ from .detect import DEFAULT_EXTRA_SCORE, MAX_OVERLAP, Detection, decide, every_l
 from .fused import METHODS, method_detectors, recognize_fused, verify_fused, verify_method_scene
 from .gallery import Gallery, Reference, build_gallery
 from .match import Matches, match_item, match_scene
-from .shape import (ShapeTemplate, calibrate_shapes, decide_shape, scene_regions, shape_score, shape_scores,
-                    shape_template)
+from .shape import (ShapeTemplate, calibrate_shapes, decide_shape, kept_shapes, scene_regions, shape_score,
+                    shape_scores, shape_template)
 from .report import (NO_TRUTH, brand_recall, confusion, draw_confusion, draw_detection, draw_missed, evaluate,
                      evaluate_records, found_counts, found_plot, missed_record, merge_dropped, metric_key, metrics_of, pick_method, pr_rows, quad_error,
                      report_summary, scene_record)
@@ -49,6 +49,7 @@ __all__ = [
     "affine_ransac", "brand_recall", "build_gallery", "calibrate_shapes", "confusion", "decide", "decide_shape",
     "draw_confusion", "draw_detection",
     "draw_missed", "evaluate", "evaluate_records", "every_logo", "fit_affine", "found_counts", "found_plot",
+    "kept_shapes",
     "map_poses", "match_item", "match_scene", "merge_dropped", "method_detectors", "metric_key", "metrics_of",
     "missed_record", "pick_method", "pose_agrees", "pose_probability", "pr_rows", "quad_error", "quad_iou",
     "recognize", "recognize_fused", "report_summary", "scene_record", "scene_regions", "shape_problem",

@@ -322,8 +322,8 @@ def found_plot(decisions: dict[str, Sequence[dict]], brands: Sequence[str]) -> l
 
 
 def pick_method(decisions: dict[str, Sequence[dict]], threshold: float, default: str) -> str:
-    """The detector whose results the overlays show: the most accurate one with ground truth (ties: more correct
-    answers, then the earlier one), else ``default`` when it ran, else the first."""
+    """The method whose results the overlays show: the most accurate one with ground truth (ties: more correct
+    answers, then the earlier one), else ``default`` (``logo.report.method``) when it ran, else the first."""
     scored = {m: evaluate_records(r, threshold) for m, r in decisions.items()}
     if any(v is not None for v in scored.values()):
         return max((m for m in decisions if scored[m] is not None),

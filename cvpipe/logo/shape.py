@@ -194,6 +194,15 @@ def calibrate_shapes(templates: Sequence[ShapeTemplate], scores: np.ndarray, pho
     return out
 
 
+def kept_shapes(templates: Sequence[ShapeTemplate], thresholds: np.ndarray) -> tuple[list[ShapeTemplate], np.ndarray]:
+    """The templates that :func:`calibrate_shapes` kept (their threshold is not NaN) and their thresholds."""
+    thresholds = np.asarray(thresholds, float)
+    if len(thresholds) != len(templates):
+        raise ValueError(f"`thresholds` must hold one value per template ({len(templates)}), got {len(thresholds)}")
+    kept = np.flatnonzero(~np.isnan(thresholds))
+    return [templates[i] for i in kept], thresholds[kept]
+
+
 def decide_shape(templates: Sequence[ShapeTemplate], thresholds: np.ndarray, scene_scores: np.ndarray,
                  margin: float = MARGIN) -> tuple[str, float, int] | None:
     """The brand of the kept template that clears its threshold by the largest margin above ``margin``, that

@@ -332,6 +332,15 @@ class LogoVerifyParams(Section):
     scale_tolerance: float = Field(2.0, gt=1.0, le=16.0)
 
 
+class LogoReportParams(Section):
+    """``logo.report``: the method whose answers ``cvpipe logo`` gives by default and whose overlays the report shows
+    when no scene has ground truth (with ground truth, the most accurate method's). ``fused`` by default: on the
+    leave-one-photo-out protocol it finds the most logos at SIFT's precision (``cvpipe bench logo``,
+    BENCHMARKS.md), at about 2.4x SIFT's time per scene."""
+
+    method: LogoMethod = "fused"
+
+
 # ---- stereo ----
 # One section per compared method, so that `dvc repro` reruns only the method whose parameters changed (the
 # `stereo_disparity` matrix stage reads `stereo.<method>`); the defaults equal the function defaults in
@@ -461,8 +470,9 @@ SECTIONS: dict[str, type[Section]] = {
     "defect.diff": DefectDiffParams, "defect.regions": DefectRegionParams, "panorama.features": PanoramaFeaturesParams,
     "panorama.match": PanoramaMatchParams, "panorama.homographies": PanoramaHomographiesParams,
     "panorama.warp": PanoramaWarpParams, "panorama.blend": PanoramaBlendParams, "logo.features": LogoFeaturesParams,
-    "logo.match": LogoMatchParams, "logo.verify": LogoVerifyParams, "stereo.disparity": StereoDisparityParams,
-    "stereo.sgm": StereoSgmParams, "stereo.opencv_bm": StereoBmParams, "stereo.opencv_sgbm": StereoSgbmParams,
-    "stereo.report": StereoReportParams, "stereo.rectify": StereoRectifyParams, "stereo.depth": StereoDepthParams,
+    "logo.match": LogoMatchParams, "logo.verify": LogoVerifyParams, "logo.report": LogoReportParams,
+    "stereo.disparity": StereoDisparityParams, "stereo.sgm": StereoSgmParams, "stereo.opencv_bm": StereoBmParams,
+    "stereo.opencv_sgbm": StereoSgbmParams, "stereo.report": StereoReportParams, "stereo.rectify": StereoRectifyParams,
+    "stereo.depth": StereoDepthParams,
     "compute": ComputeParams,
 }
