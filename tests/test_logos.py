@@ -467,6 +467,23 @@ def test_cli_notes_each_gallery_brand_and_image_it_does_not_use(tmp_path, galler
     assert err == "" and json.loads(out)[0]["brand"] == "brand1"
 
 
+@pytest.mark.parametrize("method", ["fused", "sift"])
+def test_cli_notes_an_image_no_detector_can_use_once_with_each_detectors_count(tmp_path, gallery_dir, marks, capsys,
+                                                                                method):
+    # a smooth ramp is not blank (many grey levels) but gives no detector a keypoint; the default method (fused)
+    # reads each image once and notes it once, with the count of every detector it ran
+    ramp = np.tile(np.linspace(60, 200, 64).astype(np.uint8), (64, 1))
+    cv2.imwrite(str(gallery_dir / "brand1" / "ramp.png"), ramp)
+    scene = tmp_path / "s.jpg"
+    cv2.imwrite(str(scene), _scene(marks["brand1"], _view((320, 240), 0.8, 10, PERSP)))
+    assert cli.main(["logo", str(scene), "--gallery", str(gallery_dir), "--json", "--method", method]) == 0
+    out, err = capsys.readouterr()
+    counts = ", ".join(f"0 keypoints with {d}" for d in logo.method_detectors(method))
+    assert json.loads(out)[0]["brand"] == "brand1"
+    assert err.splitlines() == [f"cvpipe: note: gallery image {gallery_dir / 'brand1' / 'ramp.png'} of brand "
+                                f"'brand1' is not used: {counts}, fewer than the 8 needed"]
+
+
 def test_cli_bad_ratio(tmp_path, gallery_dir, capsys):
     assert cli.main(["logo", "x.jpg", "--gallery", str(gallery_dir), "--ratio", "1.5"]) == 2
     assert "`--ratio` must be in" in capsys.readouterr().err

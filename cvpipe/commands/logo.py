@@ -61,15 +61,15 @@ def gallery_files(folder: str | Path) -> list[tuple[str, Path]]:
     return sorted(items, key=lambda t: (t[0], str(t[1])))
 
 
-def gallery_references(folder: str | Path, detector: str,
-                       max_features: int) -> tuple[list[logo.Reference], dict[str, str]]:
-    """Read and detect every reference of a gallery folder (see :func:`gallery_files`).
+def gallery_references(files: Sequence[tuple[str, Path]], detectors: Sequence[str],
+                       max_features: int) -> tuple[dict[str, list[logo.Reference]], dict[str, str]]:
+    """Read every gallery image of ``files`` (:func:`gallery_files`) once and detect it with each of ``detectors``.
 
     Returns
     -------
-    references : list of Reference
-        One per image file, blank ones included (they have no keypoints: :func:`cvpipe.logo.build_gallery` leaves
-        them out).
+    references : dict
+        Detector -> one Reference per image file, blank ones included (they have no keypoints:
+        :func:`cvpipe.logo.build_gallery` leaves them out).
     blank : dict
         Reference name -> ``"blank (one grey level, v)"`` for each image of one grey level.
     """
@@ -77,42 +77,47 @@ def gallery_references(folder: str | Path, detector: str,
     from ..features import detect
     from ..logo.gallery import blank_reason, check_gallery_memory, features_nbytes
 
-    refs, blank, held = [], {}, 0
-    for brand, f in progress(gallery_files(folder), "gallery"):
+    refs: dict[str, list[logo.Reference]] = {d: [] for d in detectors}
+    blank, held, count = {}, 0, 0
+    for brand, f in progress(files, "gallery"):
         gray = io.read_image(f, "gray")
-        refs.append(logo.Reference(brand, str(f), detect(gray, detector, max_features),
-                                    (gray.shape[1], gray.shape[0])))
         if (why := blank_reason(gray)) is not None:
             blank[str(f)] = why
-        held += features_nbytes(refs[-1].features)
-        check_gallery_memory(held, len(refs))  # refused while reading, before the whole folder is in memory
+        for d in detectors:
+            refs[d].append(logo.Reference(brand, str(f), detect(gray, d, max_features),
+                                          (gray.shape[1], gray.shape[0])))
+            held, count = held + features_nbytes(refs[d][-1].features), count + 1
+            check_gallery_memory(held, count)  # refused while reading, before the whole folder is in memory
     return refs, blank
 
 
-def note_unused(refs: list[logo.Reference], gallery: logo.Gallery, blank: dict[str, str], min_features: int) -> None:
-    """One note per brand of ``refs`` that ``gallery`` does not use, naming each of its images and why; one per
-    unused image of a brand still used.
+def note_unused(refs: dict[str, list[logo.Reference]], galleries: dict[str, logo.Gallery], blank: dict[str, str],
+                min_features: int) -> None:
+    """One note per brand that no gallery of ``galleries`` uses, naming each of its images and why; one per image
+    that no gallery uses, of a brand still used.
 
     Parameters
     ----------
-    refs : list of Reference
-        What :func:`gallery_references` read.
-    gallery : Gallery
-        The gallery built from them (``gallery.dropped``: the names of the references left out).
+    refs : dict
+        Detector -> what :func:`gallery_references` read for it (the same images, in the same order).
+    galleries : dict
+        Detector -> the gallery built from its references (``Gallery.dropped``: the names of those left out).
     blank : dict
         :func:`gallery_references`'s reasons of the blank images.
     min_features : int
         The keypoints a reference needs.
     """
-    left_out = set(gallery.dropped)
+    detectors = list(galleries)
+    left_out = {d: set(galleries[d].dropped) for d in detectors}
+    used_brands = set().union(*(galleries[d].brands for d in detectors))
     why: dict[str, list[tuple[str, str]]] = {}
-    for r in refs:
-        if r.name in left_out:
-            reason = blank.get(r.name) or (f"{len(r.features)} keypoints with {gallery.detector}, fewer than the "
-                                           f"{min_features} needed")
+    for k, r in enumerate(refs[detectors[0]]):
+        if all(r.name in left_out[d] for d in detectors):
+            counts = ", ".join(f"{len(refs[d][k].features)} keypoints with {d}" for d in detectors)
+            reason = blank.get(r.name) or f"{counts}, fewer than the {min_features} needed"
             why.setdefault(r.brand, []).append((r.name, reason))
     for brand, items in sorted(why.items()):
-        if brand in gallery.brands:
+        if brand in used_brands:
             for name, reason in items:
                 note(f"note: gallery image {name} of brand {brand!r} is not used: {reason}")
         else:
@@ -151,13 +156,13 @@ def shape_photo_files(folder: str | Path, brands: Sequence[str]) -> list[tuple[s
     return out
 
 
-def shape_cue(gallery: str | Path, photos: str | Path) -> tuple[list, np.ndarray]:
-    """The gallery's silhouettes (:func:`cvpipe.logo.shape.shape_template`, one per gallery image) calibrated on the
-    labelled photos of ``photos`` (:func:`shape_photo_files`); returns the kept templates and their thresholds."""
+def shape_cue(files: Sequence[tuple[str, Path]], photos: str | Path) -> tuple[list, np.ndarray]:
+    """The gallery's silhouettes (:func:`cvpipe.logo.shape.shape_template`, one per gallery image of ``files``,
+    :func:`gallery_files`) calibrated on the labelled photos of ``photos`` (:func:`shape_photo_files`); returns the
+    kept templates and their thresholds."""
     from .. import io
     from ..logo import shape
 
-    files = gallery_files(gallery)
     templates = [t for t in (shape.shape_template(io.read_image(f), b, str(f)) for b, f in files) if t is not None]
     labelled = shape_photo_files(photos, sorted({b for b, _ in files}))
     regions = [shape.scene_regions(io.read_image(f)) for _, f in progress(labelled, "shape photos")]
@@ -290,17 +295,17 @@ def run(args: argparse.Namespace) -> int:
     pictures = overlay_paths(args.scenes, args.overlay, SUFFIX)
     io.check_distinct_outputs([("`--overlay`", p) for p in pictures],
                               [(f"SCENE {k + 1}", path) for k, path in enumerate(args.scenes)])
-    galleries = {}
-    for d in logo.method_detectors(args.method):
-        with step(f"gallery ({d})"):
-            # indexed before any scene runs, so that a gallery error is one line of its own
-            refs, blank = gallery_references(args.gallery, d, args.max_features)
-            galleries[d] = logo.build_gallery(refs, mp.min_features, mp.reference_features)
-        note_unused(refs, galleries[d], blank, mp.min_features)
+    detectors = logo.method_detectors(args.method)
+    with step(f"gallery ({', '.join(detectors)})"):
+        # indexed before any scene runs, so that a gallery error is one line of its own
+        files = gallery_files(args.gallery)
+        refs, blank = gallery_references(files, detectors, args.max_features)
+        galleries = {d: logo.build_gallery(refs[d], mp.min_features, mp.reference_features) for d in detectors}
+    note_unused(refs, galleries, blank, mp.min_features)
     shapes = None
     if args.shape_photos:
         with step("shape cue"):
-            shapes = shape_cue(args.gallery, args.shape_photos)
+            shapes = shape_cue(files, args.shape_photos)
     records, failed = [], 0
     shared = (galleries, args.max_features, args.min_long_side, mp, vp, args.seed, shapes)
     scenes = read_images(args.scenes, "gray", named=True)
