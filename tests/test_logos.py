@@ -181,6 +181,26 @@ def test_logo_command_refuses_a_gallery_over_the_budget_while_reading_it(marks, 
     assert len(err) == 1 and "the gallery of 1 reference images" in err[0] and "CVPIPE_MEMORY_BUDGET_GB" in err[0]
 
 
+def test_logo_command_checks_the_budget_with_every_detectors_keypoints_and_counts_images(marks, tmp_path,
+                                                                                         monkeypatch):
+    # fused holds three galleries at once: the bytes checked grow with each detector's keypoints, while the number
+    # of reference images the message names is the number of files read
+    gallery = tmp_path / "gallery"
+    gallery.mkdir()
+    for b, m in marks.items():
+        cv2.imwrite(str(gallery / f"{b}.png"), m)
+    scene = tmp_path / "scene.png"
+    cv2.imwrite(str(scene), _scene(marks["brand0"], _view((300, 240), 0.8, 0, PERSP)))
+    seen = []
+    monkeypatch.setattr(logo.gallery, "check_gallery_memory", lambda held, images: seen.append((held, images)))
+    assert cli.main(["logo", "--gallery", str(gallery), str(scene), "--method", "fused"]) == 0
+    detectors = len(logo.method_detectors("fused"))
+    reading = seen[:len(marks) * detectors]  # then build_gallery checks each detector's gallery on its own
+    assert [n for _, n in reading] == [k for k in range(1, len(marks) + 1) for _ in range(detectors)]
+    assert all(b[0] > a[0] for a, b in zip(reading, reading[1:]))
+    assert [n for _, n in seen[len(reading):]] == [len(marks)] * detectors
+
+
 def test_boxed_reference_projects_its_box(marks):
     """A reference that is a whole photo with the logo boxed: the quad is the box's outline in the scene."""
     canvas = fit(photo("chelsea"), 400, 300)

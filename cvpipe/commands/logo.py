@@ -78,16 +78,16 @@ def gallery_references(files: Sequence[tuple[str, Path]], detectors: Sequence[st
     from ..logo.gallery import blank_reason, check_gallery_memory, features_nbytes
 
     refs: dict[str, list[logo.Reference]] = {d: [] for d in detectors}
-    blank, held, count = {}, 0, 0
-    for brand, f in progress(files, "gallery"):
+    blank, held = {}, 0
+    for images, (brand, f) in enumerate(progress(files, "gallery"), 1):
         gray = io.read_image(f, "gray")
         if (why := blank_reason(gray)) is not None:
             blank[str(f)] = why
         for d in detectors:
             refs[d].append(logo.Reference(brand, str(f), detect(gray, d, max_features),
                                           (gray.shape[1], gray.shape[0])))
-            held, count = held + features_nbytes(refs[d][-1].features), count + 1
-            check_gallery_memory(held, count)  # refused while reading, before the whole folder is in memory
+            held += features_nbytes(refs[d][-1].features)  # every detector's galleries are held at once
+            check_gallery_memory(held, images)  # refused while reading, before the whole folder is in memory
     return refs, blank
 
 
