@@ -165,13 +165,19 @@ def test_gallery_over_the_memory_budget_is_refused_naming_what_to_change(marks, 
     assert logo.build_gallery(refs).brands == tuple(sorted(marks))
 
 
-def test_logo_command_refuses_a_gallery_over_the_budget_while_reading_it(marks, tmp_path, monkeypatch, capsys):
+def _gallery_and_scene(marks, tmp_path) -> tuple[Path, Path]:
+    """A gallery folder with one file per mark and a scene showing the first mark."""
     gallery = tmp_path / "gallery"
     gallery.mkdir()
     for b, m in marks.items():
         cv2.imwrite(str(gallery / f"{b}.png"), m)
     scene = tmp_path / "scene.png"
     cv2.imwrite(str(scene), _scene(marks["brand0"], _view((300, 240), 0.8, 0, PERSP)))
+    return gallery, scene
+
+
+def test_logo_command_refuses_a_gallery_over_the_budget_while_reading_it(marks, tmp_path, monkeypatch, capsys):
+    gallery, scene = _gallery_and_scene(marks, tmp_path)
     # a budget that holds the detection of every image (0.1 GB), and a gallery that costs 10,000 bytes per byte of
     # keypoints: the first reference (about 70 KB of them) is already over, so the command stops at it
     monkeypatch.setenv("CVPIPE_MEMORY_BUDGET_GB", "0.1")
@@ -185,12 +191,7 @@ def test_logo_command_checks_the_budget_with_every_detectors_keypoints_and_count
                                                                                          monkeypatch):
     # fused holds three galleries at once: the bytes checked grow with each detector's keypoints, while the number
     # of reference images the message names is the number of files read
-    gallery = tmp_path / "gallery"
-    gallery.mkdir()
-    for b, m in marks.items():
-        cv2.imwrite(str(gallery / f"{b}.png"), m)
-    scene = tmp_path / "scene.png"
-    cv2.imwrite(str(scene), _scene(marks["brand0"], _view((300, 240), 0.8, 0, PERSP)))
+    gallery, scene = _gallery_and_scene(marks, tmp_path)
     seen = []
     monkeypatch.setattr(logo.gallery, "check_gallery_memory", lambda held, images: seen.append((held, images)))
     assert cli.main(["logo", "--gallery", str(gallery), str(scene), "--method", "fused"]) == 0
