@@ -221,32 +221,6 @@ def test_multiband_on_crops_in_threads_gives_the_whole_boxes_one_at_a_time(monke
     d = np.abs(whole.astype(int) - pano)
     assert d.max() <= 1 and (d > 0).mean() < 1e-3, (d.max(), (d > 0).mean())
 
-def test_stitch_on_its_own_thread_gives_what_the_steps_give_on_the_callers_thread():
-    import threading
-
-    from cvpipe.errors import EstimationError
-    from cvpipe.panorama import _stitch_steps
-    from cvpipe.params import (PanoramaBlendParams, PanoramaFeaturesParams, PanoramaHomographiesParams,
-                               PanoramaMatchParams, PanoramaWarpParams)
-    from cvpipe.samples import photo
-
-    img = photo("astronaut")
-    views = [img[:, 200:], img[:, :320]]
-    steps = _stitch_steps(views, PanoramaFeaturesParams(), PanoramaMatchParams(), PanoramaHomographiesParams(),
-                          PanoramaWarpParams(), PanoramaBlendParams(), True, 0, None)
-    pano = panorama.stitch(views, rng=0)
-    assert np.array_equal(pano.image, steps.image) and np.array_equal(pano.mask, steps.mask)
-    assert pano.registration.used == steps.registration.used
-    for k in steps.homographies:
-        assert np.array_equal(pano.homographies[k], steps.homographies[k])
-    # an error raised on the stitch's thread reaches the caller as it is, and the thread is gone afterwards
-    before = threading.active_count()
-    flat = np.full((120, 160, 3), 128, np.uint8)
-    with pytest.raises(EstimationError):
-        panorama.stitch([flat, flat.copy()], rng=0)
-    assert threading.active_count() == before
-
-
 def test_bench_accuracy_measures_direct_and_composed_errors():
     from types import SimpleNamespace
 
