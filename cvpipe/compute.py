@@ -2,7 +2,8 @@
 
 ``compute.scheduler`` chooses where the work runs and never what it computes:
 
-- ``""`` (the default): a plain loop in this process; Dask is not even imported.
+- ``""`` (the default): a loop in this process, the items one at a time on a thread of its own; Dask is not even
+  imported.
 - ``"local"``: a ``distributed.LocalCluster`` of ``workers`` single-threaded worker processes (default: one per
   core), with OpenCV and our OpenMP kernels limited to one thread each so that the workers do not fight over the
   cores.
@@ -26,12 +27,14 @@ up on it, it is resubmitted up to ``retries`` times). This module never touches 
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import itertools
 import logging
 import os
 import sys
 import uuid
 from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -276,10 +279,20 @@ def _progress_callback(progress: Any, total: int | None) -> tuple[Callable[[int]
 
 
 def _serial(fn, items, shared, with_shared, update) -> Iterator[ItemResult]:
-    for i, item in enumerate(interrupt.checked(items)):
-        ok, value, etype, *exc = _run_one(fn, item, shared, with_shared, keep=True)
-        yield ItemResult(i, value, None, None) if ok else ItemResult(i, None, value, etype, exception=exc[0])
-        update(i + 1)
+    """The in-process loop: one item at a time, each on the same thread of the run's own, as on a Dask worker.
+
+    With glibc, memory that the main thread frees goes back to the system and each item's arrays are faulted in
+    again, while another thread's allocator keeps it for the next item (`cvpipe logo` on the 52 sample scenes, SIFT:
+    10.9-11.9 s on the main thread, 9.2-9.4 s on a thread of its own, the same answers). Each item runs with the
+    caller's context variables; OpenMP's thread count there is the process's (``OMP_NUM_THREADS``), as on a Dask
+    worker. Ctrl-C is seen between items.
+    """
+    with ThreadPoolExecutor(1, thread_name_prefix="cvpipe-items") as thread:
+        for i, item in enumerate(interrupt.checked(items)):
+            ok, value, etype, *exc = thread.submit(contextvars.copy_context().run, _run_one, fn, item, shared,
+                                                   with_shared, True).result()
+            yield ItemResult(i, value, None, None) if ok else ItemResult(i, None, value, etype, exception=exc[0])
+            update(i + 1)
 
 
 @contextlib.contextmanager

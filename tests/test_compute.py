@@ -4,11 +4,13 @@ scheduler is one line and exit 1, and the window bounds what is held at once."""
 
 from __future__ import annotations
 
+import contextvars
 import json
 import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 
 import cv2
@@ -117,6 +119,29 @@ def test_serial_results_in_order_with_the_bad_item_listed():
     assert [r.value for r in got] == [x * x + 1 if x != 3 else None for x in range(8)]
     assert got[3] == ItemResult(3, None, "item 3: not a readable image", "InputError")
     assert all(r.ok for i, r in enumerate(got) if i != 3)
+
+
+def _where_it_ran(item, shared):
+    return threading.get_ident(), shared["var"].get()
+
+
+def test_serial_items_run_on_one_thread_of_their_own_with_the_callers_context():
+    var = contextvars.ContextVar("var", default="unset")
+    before_threads = threading.active_count()
+    token = var.set("the caller's")
+    try:
+        got = [r.value for r in map_items(_where_it_ran, range(4), shared={"var": var})]
+    finally:
+        var.reset(token)
+    idents = {g[0] for g in got}
+    assert len(idents) == 1 and threading.get_ident() not in idents  # one thread, not the caller's
+    assert all(g[1] == "the caller's" for g in got)  # the caller's context variables
+    assert threading.active_count() == before_threads  # the thread ends with the run
+    # a run left after its first item ends its thread too
+    run = map_items(_where_it_ran, range(4), shared={"var": var})
+    next(run)
+    run.close()
+    assert threading.active_count() == before_threads
 
 
 @pytest.mark.slow
